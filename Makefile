@@ -1,0 +1,41 @@
+# Quick start: `make demo`, `make test`. Both create .venv with Python 3.11 when missing.
+PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
+VENV   := .venv
+VPY    := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+BSTAMP := $(VENV)/.installed-bench
+
+.PHONY: demo test bench campaign campaign-test venv clean
+
+$(VPY):
+	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python 3.11 or newer is needed, found " + sys.version' 
+	$(PYTHON) -m venv $(VENV)
+	$(VPY) -m pip install -q --upgrade pip
+
+$(STAMP): pyproject.toml | $(VPY)
+	$(VPY) -m pip install -q -e '.[test]'
+	@touch $(STAMP)
+
+$(BSTAMP): pyproject.toml $(STAMP)
+	$(VPY) -m pip install -q -e '.[test,bench]'
+	@touch $(BSTAMP)
+
+venv: $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/companion demo antipodal
+
+test: $(STAMP)
+	$(VENV)/bin/pytest -q
+
+bench: $(BSTAMP)
+	$(VPY) -m tests.benchmarks
+
+campaign: $(STAMP)
+	$(VENV)/bin/companion campaign --family antipodal --episodes 200 --methods hyperplane,paper,deterministic,bhattacharyya --seed 1 --json out/campaign.json --plot out/campaign
+
+campaign-test: $(STAMP)
+	$(VENV)/bin/pytest -q -m slow
+
+clean:
+	rm -rf $(VENV) out bench-results.json

@@ -1,0 +1,53 @@
+"""Run every ``bench_*.py`` module (or those named on the command line) and report."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import pkgutil
+import platform
+import sys
+import time
+from pathlib import Path
+
+import tests.benchmarks as _pkg
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _fmt(value: object) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return "" if value is None else str(value)
+
+
+def main(argv: list[str]) -> int:
+    wanted = set(argv)
+    modules = sorted(m.name for m in pkgutil.iter_modules(_pkg.__path__) if m.name.startswith("bench_"))
+    if wanted:
+        modules = [m for m in modules if m.removeprefix("bench_") in wanted or m in wanted]
+    rows: list[dict] = []
+    for name in modules:
+        module = importlib.import_module(f"{_pkg.__name__}.{name}")
+        t0 = time.perf_counter()
+        print(f"running {name} ...", file=sys.stderr, flush=True)
+        for row in module.run():
+            rows.append({"suite": name.removeprefix("bench_"), **row})
+        print(f"  done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+    cols = ["suite", "name", "value", "unit", "target", "peer", "ratio", "note"]
+    table = [[_fmt(r.get(c)) for c in cols] for r in rows]
+    widths = [max(len(c), *(len(t[i]) for t in table)) if table else len(c) for i, c in enumerate(cols)]
+    print("  ".join(c.ljust(w) for c, w in zip(cols, widths)))
+    for t in table:
+        print("  ".join(v.ljust(w) for v, w in zip(t, widths)))
+    out = {
+        "machine": {"python": platform.python_version(), "platform": platform.platform(), "processor": platform.processor()},
+        "rows": rows,
+    }
+    (ROOT / "bench-results.json").write_text(json.dumps(out, indent=2))
+    print(f"wrote {ROOT / 'bench-results.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
