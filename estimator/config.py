@@ -1,0 +1,132 @@
+"""Frozen, validated configuration of the drone filter and the obstacle tracker.
+
+Units are in the field names (``_m``, ``_mps``, ``_s``, ``_m2ps3``). Invalid values
+raise :class:`~estimator.errors.EstimatorConfigError` naming the field and the value;
+:meth:`DroneFilterConfig.from_mapping` (and the tracker's) reject unknown keys, for
+loading the ``[estimator]`` section of a scenario file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Self
+
+from estimator.errors import EstimatorConfigError
+
+logger = logging.getLogger(__name__)
+
+
+def _require_positive(obj: object, name: str) -> None:
+    value = getattr(obj, name)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise EstimatorConfigError(
+            f"{type(obj).__name__}.{name} must be a finite number > 0, got {value!r}"
+        )
+
+
+class _FromMapping:
+    """Mixin: build a config from a mapping (e.g. a TOML table), rejecting unknown keys."""
+
+    @classmethod
+    def from_mapping(cls, mapping: Mapping[str, Any], where: str = "") -> Self:
+        """Build from ``mapping``; ``where`` (e.g. ``"scenario.toml [estimator.drone]"``)
+        prefixes the error message.
+
+        Raises
+        ------
+        EstimatorConfigError
+            On an unknown key or an invalid value.
+        """
+        known = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+        unknown = sorted(set(mapping) - known)
+        prefix = f"{where}: " if where else ""
+        if unknown:
+            raise EstimatorConfigError(
+                f"{prefix}unknown key(s) {unknown} for {cls.__name__}; known: {sorted(known)}"
+            )
+        try:
+            return cls(**mapping)
+        except EstimatorConfigError as exc:
+            raise EstimatorConfigError(f"{prefix}{exc}") from None
+
+
+@dataclass(frozen=True, kw_only=True)
+class DroneFilterConfig(_FromMapping):
+    """Noise settings of :class:`~estimator.DroneFilter` (constant velocity, NED).
+
+    Parameters
+    ----------
+    accel_noise_psd_m2ps3 : float
+        Power spectral density of the white acceleration noise per axis, m^2/s^3.
+        Over ``dt`` the velocity variance grows by ``q dt``.
+    position_noise_std_m : float
+        Position measurement noise (1 sigma, per axis, m), used where the report gives
+        no finite variance (``LOCAL_POSITION_NED``, or NaN in ``ODOMETRY``).
+    velocity_noise_std_mps : float
+        Velocity measurement noise (1 sigma, per axis, m/s), likewise.
+    initial_velocity_std_mps : float
+        Velocity prior (1 sigma, per axis, m/s) when a (re)initialising measurement
+        carries no velocity.
+    reinit_gap_s : float
+        A measurement arriving more than this after the last accepted one
+        re-initialises the filter from that measurement, s.
+    """
+
+    accel_noise_psd_m2ps3: float = 1.0
+    position_noise_std_m: float = 0.15
+    velocity_noise_std_mps: float = 0.1
+    initial_velocity_std_mps: float = 2.0
+    reinit_gap_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            _require_positive(self, f.name)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackerConfig(_FromMapping):
+    """Settings of :class:`~estimator.ObstacleTracker` (one constant-velocity filter per track).
+
+    Parameters
+    ----------
+    accel_noise_psd_m2ps3 : float
+        Power spectral density of the obstacles' white acceleration noise per axis,
+        m^2/s^3. Sets how fast predicted uncertainty grows with look-ahead.
+    position_noise_std_m : float
+        Position measurement noise (1 sigma, per axis, m) when a report has no valid
+        covariance.
+    velocity_noise_std_mps : float
+        Velocity measurement noise (1 sigma, per axis, m/s) when a report carries a
+        velocity without covariance.
+    initial_velocity_std_mps : float
+        Wide velocity prior of a new track (1 sigma, per axis, m/s) when its first
+        report carries no velocity.
+    gate_probability : float
+        Probability mass of the innovation gate, in (0, 1): a report whose normalised
+        innovation squared exceeds ``chi2.ppf(gate_probability, dim_z)`` is rejected.
+    reinit_gap_s : float
+        A report more than this after the track's last accepted one re-initialises
+        the track, s. This also ends a lock-out by the gate.
+    drop_after_s : float
+        :meth:`~estimator.ObstacleTracker.prune` drops tracks silent for longer, s.
+    """
+
+    accel_noise_psd_m2ps3: float = 0.5
+    position_noise_std_m: float = 0.15
+    velocity_noise_std_mps: float = 0.2
+    initial_velocity_std_mps: float = 3.0
+    gate_probability: float = 0.9999
+    reinit_gap_s: float = 1.5
+    drop_after_s: float = 3.0
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            _require_positive(self, f.name)
+        if not self.gate_probability < 1.0:
+            raise EstimatorConfigError(
+                f"TrackerConfig.gate_probability must be in (0, 1), got {self.gate_probability!r}"
+            )

@@ -1,0 +1,150 @@
+"""One timed constant-velocity Kalman filter on filterpy, shared by the drone filter and each track.
+
+It owns the time bookkeeping (out-of-order, duplicate, re-initialisation after a
+gap), the optional innovation gate and the filterpy :class:`KalmanFilter` that does
+the arithmetic. filterpy's ``update`` is the Joseph form::
+
+    K = P H' S^-1,  S = H P H' + R
+    P = (I - K H) P (I - K H)' + K R K'
+
+which keeps ``P`` symmetric positive semi-definite for any gain, even with rounding;
+the result is then symmetrised to remove the last bit of asymmetry.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+from estimator.covariance import symmetrise
+from estimator.models import STATE_DIM, process_noise, propagate, propagate_position, transition_matrix
+from estimator.results import GaussianState, Reason, UpdateResult
+from estimator.measurement import Measurement
+
+logger = logging.getLogger(__name__)
+
+
+class ConstantVelocityFilter:
+    """A filterpy constant-velocity filter that knows the time of its estimate.
+
+    Parameters
+    ----------
+    accel_noise_psd_m2ps3 : float
+        White acceleration noise PSD, m^2/s^3.
+    initial_velocity_std_mps : float
+        Velocity prior (1 sigma per axis, m/s) when initialising without velocity.
+    reinit_gap_s : float
+        Gap after the last accepted measurement beyond which a measurement
+        re-initialises the filter, s.
+    gate_thresholds : dict of int to float, or None
+        NIS threshold per measurement dimension (3, 6); ``None`` disables gating.
+    label : str
+        Name used in log messages (``"drone"``, ``"track (101, 1)"``).
+    """
+
+    def __init__(
+        self,
+        *,
+        accel_noise_psd_m2ps3: float,
+        initial_velocity_std_mps: float,
+        reinit_gap_s: float,
+        gate_thresholds: dict[int, float] | None = None,
+        label: str = "filter",
+    ) -> None:
+        self._q = accel_noise_psd_m2ps3
+        self._v0_var = initial_velocity_std_mps**2
+        self._reinit_gap_s = reinit_gap_s
+        self._gate = gate_thresholds
+        self._label = label
+        self._kf = KalmanFilter(dim_x=STATE_DIM, dim_z=3)
+        self._kf.x = np.zeros(STATE_DIM)
+        self.t_s: float | None = None
+        """Time of the current estimate, s (``None`` before the first measurement)."""
+
+    @property
+    def kf(self) -> KalmanFilter:
+        """The underlying filterpy filter (``x`` is 1-D, shape (6,))."""
+        return self._kf
+
+    @property
+    def state(self) -> GaussianState | None:
+        """Current estimate, or ``None`` before the first accepted measurement."""
+        if self.t_s is None:
+            return None
+        return GaussianState(self.t_s, self._kf.x, self._kf.P)
+
+    def update(self, t_s: float, m: Measurement) -> UpdateResult:
+        """Predict to ``t_s`` and correct with ``m`` (or initialise from it).
+
+        Parameters
+        ----------
+        t_s : float
+            Measurement time, s. Must be finite (checked by the caller).
+        m : Measurement
+            Validated measurement.
+
+        Returns
+        -------
+        UpdateResult
+        """
+        if self.t_s is None:
+            self._initialise(t_s, m)
+            return UpdateResult(True, Reason.INITIALISED, t_s)
+        dt = t_s - self.t_s
+        if dt < 0.0:
+            return self._reject(t_s, Reason.OUT_OF_ORDER, f"t={t_s:.6f} s is {-dt:.6f} s before the estimate")
+        if dt == 0.0:
+            return self._reject(t_s, Reason.DUPLICATE, f"t={t_s:.6f} s repeats the last accepted time")
+        if dt > self._reinit_gap_s:
+            logger.info("%s: %.3f s since last accepted measurement, re-initialising", self._label, dt)
+            self._initialise(t_s, m)
+            return UpdateResult(True, Reason.REINITIALISED, t_s)
+
+        kf = self._kf
+        x0, P0 = kf.x, kf.P
+        kf.predict(F=transition_matrix(dt), Q=process_noise(dt, self._q))  # x = F x;  P = F P F' + Q
+
+        y = m.z - m.H @ kf.x  # y = z - H x
+        S = m.H @ kf.P @ m.H.T + m.R  # S = H P H' + R
+        nis = float(y @ np.linalg.solve(S, y))  # NIS = y' S^-1 y
+        dof = m.z.size
+        if self._gate is not None and not nis <= self._gate[dof]:
+            kf.x, kf.P = x0, P0  # undo the prediction: the estimate stays at self.t_s
+            return self._reject(
+                t_s, Reason.GATED, f"NIS {nis:.3g} > gate {self._gate[dof]:.3g} ({dof} dof)", nis, dof,
+                level=logging.INFO,
+            )
+
+        kf.update(m.z, R=m.R, H=m.H)  # Joseph form, see module docstring
+        kf.P = symmetrise(kf.P)
+        self.t_s = t_s
+        return UpdateResult(True, Reason.UPDATED, t_s, nis, dof)
+
+    def predict_position(self, lags_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position mean (N, 3) and covariance (N, 3, 3) at ``lags_s`` after the estimate."""
+        return propagate_position(self._kf.x, self._kf.P, lags_s, self._q)
+
+    def predict_state(self, lags_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Full state mean (N, 6) and covariance (N, 6, 6) at ``lags_s`` after the estimate."""
+        return propagate(self._kf.x, self._kf.P, lags_s, self._q)
+
+    def _initialise(self, t_s: float, m: Measurement) -> None:
+        # x0 = measured p (and v); P0 = R on measured parts, velocity prior otherwise
+        x = np.zeros(STATE_DIM)
+        P = np.zeros((STATE_DIM, STATE_DIM))
+        x[: m.z.size] = m.z
+        P[: m.z.size, : m.z.size] = m.R
+        if not m.has_velocity:
+            P[3:, 3:] = self._v0_var * np.eye(3)
+        self._kf.x, self._kf.P = x, P
+        self.t_s = t_s
+
+    def _reject(
+        self, t_s: float, reason: Reason, detail: str, nis: float = math.nan, dof: int = 0,
+        level: int = logging.DEBUG,
+    ) -> UpdateResult:
+        logger.log(level, "%s: rejected measurement (%s): %s", self._label, reason, detail)
+        return UpdateResult(False, reason, t_s, nis, dof, detail)

@@ -1,0 +1,150 @@
+"""Constant-velocity motion model in 3-D NED with white-noise acceleration.
+
+State ``x = [p_n, p_e, p_d, v_n, v_e, v_d]`` (metres, metres per second, local NED).
+The acceleration is continuous white noise with power spectral density ``q``
+(m^2/s^3, the same on each axis). Discretised exactly over an interval ``dt`` (s)::
+
+    F(dt) = [[I, dt I],          Q(dt) = q [[dt^3/3 I, dt^2/2 I],
+             [0,    I]]                     [dt^2/2 I,     dt I]]
+
+(Bar-Shalom, Li, Kirubarajan, *Estimation with Applications to Tracking and
+Navigation*, section 6.2.2). Because the continuous model is time invariant, the
+propagation composes exactly::
+
+    F(a + b) = F(b) F(a),     Q(a + b) = F(b) Q(a) F(b)' + Q(b)
+
+so ``k`` steps of ``dt`` give ``F^k P F^k' + sum_j F^j Q F^j' = F(k dt) P F(k dt)' + Q(k dt)``.
+:func:`propagate` and :func:`propagate_position` use that closed form, vectorised
+over look-ahead times, instead of a Python loop of ``predict`` calls.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+STATE_DIM = 6
+"""Length of the state vector ``[p (3), v (3)]``."""
+
+_I3 = np.eye(3)
+
+
+def transition_matrix(dt_s: float) -> np.ndarray:
+    """State transition ``F(dt)`` of the constant-velocity model.
+
+    Parameters
+    ----------
+    dt_s : float
+        Interval, seconds.
+
+    Returns
+    -------
+    numpy.ndarray, shape (6, 6)
+        ``[[I, dt I], [0, I]]``.
+    """
+    F = np.eye(STATE_DIM)
+    F[:3, 3:] = dt_s * _I3  # p' = p + dt v
+    return F
+
+
+def process_noise(dt_s: float, accel_noise_psd_m2ps3: float) -> np.ndarray:
+    """Exactly discretised white-noise-acceleration process noise ``Q(dt)``.
+
+    Parameters
+    ----------
+    dt_s : float
+        Interval, seconds.
+    accel_noise_psd_m2ps3 : float
+        Power spectral density ``q`` of the continuous acceleration noise, m^2/s^3,
+        per NED axis.
+
+    Returns
+    -------
+    numpy.ndarray, shape (6, 6)
+        ``q [[dt^3/3 I, dt^2/2 I], [dt^2/2 I, dt I]]``.
+    """
+    q = accel_noise_psd_m2ps3
+    Q = np.empty((STATE_DIM, STATE_DIM))
+    Q[:3, :3] = q * dt_s**3 / 3.0 * _I3
+    Q[:3, 3:] = q * dt_s**2 / 2.0 * _I3
+    Q[3:, :3] = Q[:3, 3:]
+    Q[3:, 3:] = q * dt_s * _I3
+    return Q
+
+
+def propagate(
+    mean: np.ndarray, cov: np.ndarray, lags_s: np.ndarray, accel_noise_psd_m2ps3: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Predict the full state at several look-ahead times, in closed form.
+
+    Parameters
+    ----------
+    mean : numpy.ndarray, shape (6,)
+        State ``[p, v]`` at the reference time (m, m/s, NED).
+    cov : numpy.ndarray, shape (6, 6)
+        Its covariance.
+    lags_s : numpy.ndarray, shape (N,)
+        Look-ahead times after the reference time, seconds (>= 0).
+    accel_noise_psd_m2ps3 : float
+        Acceleration noise PSD ``q``, m^2/s^3.
+
+    Returns
+    -------
+    means : numpy.ndarray, shape (N, 6)
+        ``x(tau) = F(tau) x``.
+    covs : numpy.ndarray, shape (N, 6, 6)
+        ``P(tau) = F(tau) P F(tau)' + Q(tau)``.
+    """
+    tau = np.asarray(lags_s, dtype=float)
+    Fs = np.broadcast_to(np.eye(STATE_DIM), (tau.size, STATE_DIM, STATE_DIM)).copy()
+    Fs[:, :3, 3:] = tau[:, None, None] * _I3
+    Qs = _process_noise_batch(tau, accel_noise_psd_m2ps3)
+    means = Fs @ mean  # x = F x
+    covs = Fs @ cov @ Fs.transpose(0, 2, 1) + Qs  # P = F P F' + Q
+    return means, covs
+
+
+def propagate_position(
+    mean: np.ndarray, cov: np.ndarray, lags_s: np.ndarray, accel_noise_psd_m2ps3: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Predict position mean and covariance at several look-ahead times (hot path).
+
+    The position block of :func:`propagate`, written out by blocks so that only
+    ``(N, 3, 3)`` arrays are formed::
+
+        p(tau)   = p + tau v
+        Ppp(tau) = Ppp + tau (Ppv + Ppv') + tau^2 Pvv + q tau^3 / 3 I
+
+    Parameters
+    ----------
+    mean, cov, lags_s, accel_noise_psd_m2ps3
+        As for :func:`propagate`.
+
+    Returns
+    -------
+    means : numpy.ndarray, shape (N, 3)
+        Position, m, NED.
+    covs : numpy.ndarray, shape (N, 3, 3)
+        Position covariance, m^2.
+    """
+    tau = np.asarray(lags_s, dtype=float)
+    p, v = mean[:3], mean[3:]
+    Ppp, Ppv, Pvv = cov[:3, :3], cov[:3, 3:], cov[3:, 3:]
+    t = tau[:, None, None]
+    means = p + tau[:, None] * v
+    covs = Ppp + t * (Ppv + Ppv.T) + t**2 * Pvv + (accel_noise_psd_m2ps3 / 3.0) * t**3 * _I3
+    return means, covs
+
+
+def _process_noise_batch(tau: np.ndarray, q: float) -> np.ndarray:
+    """``Q(tau)`` for each element of ``tau``, shape (N, 6, 6)."""
+    t = tau[:, None, None]
+    Qs = np.empty((tau.size, STATE_DIM, STATE_DIM))
+    Qs[:, :3, :3] = q * t**3 / 3.0 * _I3
+    Qs[:, :3, 3:] = q * t**2 / 2.0 * _I3
+    Qs[:, 3:, :3] = Qs[:, :3, 3:]
+    Qs[:, 3:, 3:] = q * t * _I3
+    return Qs

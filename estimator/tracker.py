@@ -1,0 +1,197 @@
+"""Tracker of moving obstacles: one constant-velocity Kalman filter per reporting system.
+
+Tracks are keyed by any hashable, normally the MAVLink ``(sysid, compid)`` of the
+obstacle that reports itself. A track is created on its first report with a wide
+velocity prior, corrected by later reports that pass an innovation gate, and dropped
+by :meth:`ObstacleTracker.prune` after a configurable silence. :meth:`predict` gives
+the mean and covariance of the position at look-ahead times (closed form, vectorised).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from collections.abc import Hashable
+
+import numpy as np
+from scipy.stats import chi2
+
+from estimator.config import TrackerConfig
+from estimator.cv_filter import ConstantVelocityFilter
+from estimator.errors import EstimatorInputError, UnknownTrackError
+from estimator.measurement import MeasurementRejected, assemble
+from estimator.results import GaussianState, Reason, TrackerStats, UpdateResult
+
+logger = logging.getLogger(__name__)
+
+
+class ObstacleTracker:
+    """A bank of filterpy constant-velocity filters, one per obstacle track (NED).
+
+    Parameters
+    ----------
+    config : TrackerConfig
+        Noise, gate and lifetime settings.
+    """
+
+    def __init__(self, config: TrackerConfig) -> None:
+        self.config = config
+        # NIS gate per measurement dimension: chi2.ppf(P_gate, m)
+        self.gate_thresholds = {m: float(chi2.ppf(config.gate_probability, m)) for m in (3, 6)}
+        self._tracks: dict[Hashable, ConstantVelocityFilter] = {}
+        self._counts: Counter[str] = Counter()
+
+    def keys(self) -> list[Hashable]:
+        """Keys of the tracks held, in creation order."""
+        return list(self._tracks)
+
+    def __contains__(self, key: Hashable) -> bool:
+        return key in self._tracks
+
+    def __len__(self) -> int:
+        return len(self._tracks)
+
+    @property
+    def stats(self) -> TrackerStats:
+        """Counters of update outcomes over all tracks, and track bookkeeping."""
+        return TrackerStats(**self._counts, active_tracks=len(self._tracks))
+
+    def state(self, key: Hashable) -> GaussianState:
+        """Current estimate of track ``key`` (at its last accepted report).
+
+        Raises
+        ------
+        UnknownTrackError
+            If there is no such track.
+        """
+        return self._track(key).state  # type: ignore[return-value]  # a track always has a state
+
+    def update(
+        self,
+        key: Hashable,
+        t_s: float,
+        pos: np.ndarray,
+        vel: np.ndarray | None = None,
+        pos_cov: np.ndarray | None = None,
+        vel_cov: np.ndarray | None = None,
+    ) -> UpdateResult:
+        """Fuse one obstacle report, creating the track on its first.
+
+        Never raises for a bad report: it is rejected, logged and counted.
+
+        Parameters
+        ----------
+        key : hashable
+            Track identity, e.g. ``(sysid, compid)``.
+        t_s : float
+            Report timestamp, s (the shared message time base).
+        pos : array_like, shape (3,)
+            Reported position, m, local NED.
+        vel : array_like, shape (3,), or None
+            Reported velocity, m/s, NED.
+        pos_cov, vel_cov : array_like, shape (3, 3) or (3,), or None
+            Report covariance (m^2, m^2/s^2) or per-axis variances. ``None`` or all
+            NaN (unknown) uses the configured noise; any other non-finite,
+            asymmetric or not positive definite covariance rejects the report.
+
+        Returns
+        -------
+        UpdateResult
+            ``reason`` is ``"gated"`` when the normalised innovation squared exceeds
+            ``chi2.ppf(gate_probability, dof)``.
+        """
+        result = self._update(key, t_s, pos, vel, pos_cov, vel_cov)
+        self._counts[result.reason] += 1
+        return result
+
+    def _update(self, key, t_s, pos, vel, pos_cov, vel_cov) -> UpdateResult:
+        cfg = self.config
+        try:
+            if not math.isfinite(t_s):
+                raise MeasurementRejected(Reason.NON_FINITE, f"time is not finite: {t_s!r}")
+            m = assemble(
+                pos, vel, pos_cov, vel_cov,
+                position_std_m=cfg.position_noise_std_m,
+                velocity_std_mps=cfg.velocity_noise_std_mps,
+            )
+        except MeasurementRejected as exc:
+            logger.warning("track %r: rejected report at t=%r (%s): %s", key, t_s, exc.reason, exc.detail)
+            return UpdateResult(False, exc.reason, float(t_s), detail=exc.detail)
+        track = self._tracks.get(key)
+        if track is None:
+            track = ConstantVelocityFilter(
+                accel_noise_psd_m2ps3=cfg.accel_noise_psd_m2ps3,
+                initial_velocity_std_mps=cfg.initial_velocity_std_mps,
+                reinit_gap_s=cfg.reinit_gap_s,
+                gate_thresholds=self.gate_thresholds,
+                label=f"track {key!r}",
+            )
+            self._tracks[key] = track
+            self._counts["tracks_created"] += 1
+            logger.info("track %r: created at t=%.3f s", key, t_s)
+        return track.update(float(t_s), m)
+
+    def prune(self, t_s: float) -> list[Hashable]:
+        """Drop tracks whose last accepted report is more than ``drop_after_s`` before ``t_s``.
+
+        Parameters
+        ----------
+        t_s : float
+            Current time, s (message time base).
+
+        Returns
+        -------
+        list
+            Keys of the dropped tracks.
+        """
+        stale = [k for k, tr in self._tracks.items() if t_s - tr.t_s > self.config.drop_after_s]  # type: ignore[operator]
+        for k in stale:
+            logger.info("track %r: dropped, silent since t=%.3f s", k, self._tracks[k].t_s)
+            del self._tracks[k]
+        self._counts["tracks_dropped"] += len(stale)
+        return stale
+
+    def predict(self, key: Hashable, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted position of track ``key`` at absolute times.
+
+        Closed form of repeated filterpy ``predict`` calls (see :mod:`estimator.models`)::
+
+            p(t) = p + tau v,   P(t) = [F(tau) P F(tau)' + Q(tau)]_pp,   tau = t - t_track
+
+        so uncertainty grows with look-ahead (as ``q tau^3 / 3`` at least). Times
+        before the track's estimate are treated as the estimate's time.
+
+        Parameters
+        ----------
+        key : hashable
+            Track key.
+        times_s : array_like, shape (N,)
+            Absolute times, s (message time base).
+
+        Returns
+        -------
+        means : numpy.ndarray, shape (N, 3)
+            Position, m, NED.
+        covs : numpy.ndarray, shape (N, 3, 3)
+            Position covariance, m^2.
+
+        Raises
+        ------
+        UnknownTrackError
+            If there is no such track.
+        EstimatorInputError
+            If ``times_s`` is not a finite 1-D array.
+        """
+        track = self._track(key)
+        t = np.asarray(times_s, dtype=float)
+        if t.ndim != 1 or not np.all(np.isfinite(t)):
+            raise EstimatorInputError(f"times_s must be a finite 1-D array, got shape {t.shape}")
+        lags = np.maximum(t - track.t_s, 0.0)
+        return track.predict_position(lags)
+
+    def _track(self, key: Hashable) -> ConstantVelocityFilter:
+        try:
+            return self._tracks[key]
+        except KeyError:
+            raise UnknownTrackError(f"no track {key!r}; tracks held: {self.keys()}") from None
