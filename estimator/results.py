@@ -37,7 +37,7 @@ class Reason(StrEnum):
 ACCEPTED_REASONS = frozenset({Reason.UPDATED, Reason.INITIALISED, Reason.REINITIALISED})
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays: no element-wise == (compare .mean/.cov explicitly)
 class GaussianState:
     """A Gaussian estimate of ``[p, v]`` at one time.
 

@@ -1,0 +1,168 @@
+"""Obstacle tracker: creation, gating, drop, re-initialisation, counters, SPD property."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from estimator import ObstacleTracker, TrackerConfig, UnknownTrackError
+from estimator.errors import EstimatorInputError
+
+KEY = (101, 1)
+R = 0.02 * np.eye(3)
+
+
+def tracked(cfg: TrackerConfig | None = None, steps: int = 10) -> ObstacleTracker:
+    tr = ObstacleTracker(cfg or TrackerConfig())
+    for k in range(steps):
+        assert tr.update(KEY, 0.1 * k, [20.0 - 0.1 * k, 0.0, -5.0], None, R, None).accepted
+    return tr
+
+
+def test_that_a_track_is_created_on_its_first_report_with_a_wide_velocity_prior():
+    tr = ObstacleTracker(TrackerConfig(initial_velocity_std_mps=4.0))
+    result = tr.update(KEY, 3.0, [1.0, 2.0, -5.0], None, R, None)
+    assert (result.accepted, result.reason) == (True, "initialised")
+    assert tr.keys() == [KEY] and KEY in tr and len(tr) == 1
+    s = tr.state(KEY)
+    np.testing.assert_array_equal(s.position, [1.0, 2.0, -5.0])
+    np.testing.assert_array_equal(s.velocity, [0.0, 0.0, 0.0])
+    np.testing.assert_allclose(s.velocity_cov, 16.0 * np.eye(3))
+    assert tr.stats.tracks_created == 1
+
+
+def test_that_tracks_are_independent_per_key():
+    tr = ObstacleTracker(TrackerConfig())
+    tr.update((101, 1), 0.0, [0.0, 0.0, 0.0])
+    tr.update((102, 1), 0.0, [10.0, 0.0, 0.0])
+    tr.update("adsb:abc123", 0.0, [0.0, 10.0, 0.0])
+    assert tr.keys() == [(101, 1), (102, 1), "adsb:abc123"]
+    assert tr.state((102, 1)).position[0] == 10.0
+
+
+def test_that_report_covariance_is_used_and_all_nan_means_configured():
+    tr = ObstacleTracker(TrackerConfig(position_noise_std_m=0.5))
+    C = np.array([[0.04, 0.01, 0.0], [0.01, 0.09, 0.0], [0.0, 0.0, 0.01]])
+    tr.update("a", 0.0, [0, 0, 0], None, C)
+    tr.update("b", 0.0, [0, 0, 0], None, np.full((3, 3), np.nan))
+    np.testing.assert_allclose(tr.state("a").position_cov, C)
+    np.testing.assert_allclose(tr.state("b").position_cov, 0.25 * np.eye(3))
+
+
+def innovation_at(tr: ObstacleTracker, t: float, sigmas: float, direction: np.ndarray) -> np.ndarray:
+    """A report ``sigmas`` standard deviations away along ``direction``: NIS = sigmas^2."""
+    mean, cov = tr.predict(KEY, [t])
+    S = cov[0] + R  # S = H P H' + R
+    u = direction / np.linalg.norm(direction)
+    return mean[0] + sigmas * np.linalg.cholesky(S) @ u
+
+
+def test_that_gating_rejects_a_ten_sigma_outlier_and_accepts_a_one_sigma_report():
+    tr = tracked()
+    u = np.array([1.0, -2.0, 0.5])
+    outlier = tr.update(KEY, 1.0, innovation_at(tr, 1.0, 10.0, u), None, R)
+    assert (outlier.accepted, outlier.reason) == (False, "gated")
+    assert outlier.nis == pytest.approx(100.0) and outlier.dof == 3
+    assert tr.stats.gated == 1
+    inlier = tr.update(KEY, 1.0, innovation_at(tr, 1.0, 1.0, u), None, R)
+    assert (inlier.accepted, inlier.reason) == (True, "updated")
+    assert inlier.nis == pytest.approx(1.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3).filter(lambda v: np.linalg.norm(v) > 1e-3),
+    st.floats(0.01, 1.0),
+)
+def test_that_the_gate_separates_one_and_ten_sigma_in_any_direction_and_lag(direction, lag):
+    tr = tracked()
+    t = tr.state(KEY).t_s + lag
+    assert tr.update(KEY, t, innovation_at(tr, t, 10.0, np.array(direction)), None, R).reason == "gated"
+    assert tr.update(KEY, t, innovation_at(tr, t, 1.0, np.array(direction)), None, R).accepted
+
+
+def test_that_gate_threshold_is_the_chi_square_quantile():
+    tr = ObstacleTracker(TrackerConfig(gate_probability=0.99))
+    assert tr.gate_thresholds[3] == pytest.approx(11.3448667)
+    assert tr.gate_thresholds[6] == pytest.approx(16.8118938)
+
+
+def test_that_a_gated_track_recovers_by_reinitialising_after_the_gap():
+    tr = tracked(TrackerConfig(reinit_gap_s=0.5))
+    jumped = [50.0, 0.0, -5.0]
+    assert tr.update(KEY, 1.0, jumped).reason == "gated"
+    assert tr.update(KEY, 1.3, jumped).reason == "gated"
+    assert tr.update(KEY, 1.5, jumped).reason == "reinitialised"
+    np.testing.assert_array_equal(tr.state(KEY).position, jumped)
+
+
+def test_that_silent_tracks_are_dropped_and_recreated_on_a_new_report():
+    tr = tracked(TrackerConfig(drop_after_s=2.0))
+    tr.update((102, 1), 2.5, [0.0, 0.0, -5.0])
+    assert tr.prune(2.9) == []  # last (101, 1) report at 0.9 s: silent exactly 2.0 s
+    assert tr.prune(3.0) == [KEY]
+    assert tr.keys() == [(102, 1)]
+    with pytest.raises(UnknownTrackError, match=r"no track \(101, 1\)"):
+        tr.predict(KEY, [3.0])
+    assert tr.update(KEY, 3.1, [1.0, 0.0, -5.0]).reason == "initialised"
+    stats = tr.stats
+    assert (stats.tracks_created, stats.tracks_dropped, stats.active_tracks) == (3, 1, 2)
+
+
+@pytest.mark.parametrize(
+    ("t", "pos", "pos_cov", "reason"),
+    [
+        (0.5, [1.0, 0.0, -5.0], None, "out_of_order"),
+        (0.9, [1.0, 0.0, -5.0], None, "duplicate"),
+        (1.0, [np.nan, 0.0, -5.0], None, "non_finite"),
+        (float("inf"), [1.0, 0.0, -5.0], None, "non_finite"),
+        (1.0, [1.0, 0.0, -5.0], np.diag([0.1, np.inf, 0.1]), "invalid_covariance"),
+        (1.0, [1.0, 0.0, -5.0], np.diag([0.1, -0.1, 0.1]), "invalid_covariance"),
+        (1.0, [1.0, 0.0, -5.0], np.array([[0.1, 0.05, 0], [0.0, 0.1, 0], [0, 0, 0.1]]), "invalid_covariance"),
+        (1.0, [1.0, 0.0, -5.0], np.eye(4), "invalid_shape"),
+    ],
+)
+def test_that_bad_reports_are_rejected_logged_and_counted(caplog, t, pos, pos_cov, reason):
+    tr = tracked()
+    before = tr.state(KEY)
+    with caplog.at_level(logging.DEBUG, logger="estimator"):
+        result = tr.update(KEY, t, pos, None, pos_cov)
+    assert (result.accepted, result.reason) == (False, reason)
+    assert reason in caplog.text
+    assert getattr(tr.stats, reason) == 1 and tr.stats.rejected == 1
+    np.testing.assert_array_equal(tr.state(KEY).cov, before.cov)
+
+
+def test_that_predict_validates_times_and_keys():
+    tr = tracked()
+    with pytest.raises(EstimatorInputError, match="finite 1-D"):
+        tr.predict(KEY, [[1.0, 2.0]])
+    with pytest.raises(UnknownTrackError):
+        tr.state("nobody")
+
+
+finite = st.floats(-1e4, 1e4, allow_nan=False)
+vec3 = st.lists(finite, min_size=3, max_size=3)
+spd = st.tuples(st.lists(st.floats(-1.0, 1.0), min_size=9, max_size=9), st.floats(1e-4, 10.0)).map(
+    lambda a: (lambda A: A @ A.T + a[1] * np.eye(3))(np.array(a[0]).reshape(3, 3))
+)
+report = st.tuples(st.floats(1e-3, 3.0), vec3, st.one_of(st.none(), vec3), st.one_of(st.none(), spd), st.one_of(st.none(), spd))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(report, min_size=1, max_size=25))
+def test_that_track_covariance_stays_symmetric_positive_definite_for_any_valid_reports(reports):
+    tr = ObstacleTracker(TrackerConfig())
+    t = 0.0
+    for dt, pos, vel, pcov, vcov in reports:
+        t += dt
+        tr.update(KEY, t, pos, vel, pcov, vcov)  # accepted or gated: either way the state stays SPD
+        cov = tr.state(KEY).cov
+        np.testing.assert_array_equal(cov, cov.T)
+        np.linalg.cholesky(cov)
+    _, covs = tr.predict(KEY, t + 0.3 * np.arange(1, 11))
+    np.linalg.cholesky(covs)
