@@ -184,16 +184,20 @@ class Link(abc.ABC):
 
     # ------------------------------------------------------------------ receiving
 
-    def _parse(self, t_s: float, chunk: bytes) -> list[Received]:
-        """Feed bytes to our parser; return the valid messages completed by them."""
+    def _parse(self, t_s: float, chunk: bytes, *, datagram: bool = False) -> list[Received]:
+        """Feed bytes to our parser; return the valid messages completed by them.
+
+        With ``datagram`` (UDP), the chunk is a whole datagram: a partial packet
+        left at its end cannot be completed by the next datagram and is dropped,
+        so it cannot swallow the next packet.
+        """
         self.stats.bytes_in += len(chunk)
         out: list[Received] = []
         try:
             msgs = self._mav.parse_buffer(chunk) or []
         except Exception as exc:  # pymavlink should not raise with robust_parsing; never let it through
             logger.warning("MAVLink parser error, %d bytes dropped: %s", len(chunk), exc)
-            self._mav.buf = bytearray()
-            self._mav.buf_index = 0
+            self._reset_parser()
             self.stats.bad += 1
             return out
         for msg in msgs:
@@ -209,7 +213,16 @@ class Link(abc.ABC):
             if self.tlog is not None:
                 self.tlog.write(t_s + self.tlog_offset_s, raw)
             out.append(Received(t_s, msg, raw))
+        if datagram and self._mav.buf_len() > 0:
+            logger.debug("dropped %d bytes of a partial packet at the end of a datagram", self._mav.buf_len())
+            self._reset_parser()
+            self.stats.bad += 1
         return out
+
+    def _reset_parser(self) -> None:
+        self._mav.buf = bytearray()
+        self._mav.buf_index = 0
+        self._mav.expected_length = mavlink2.HEADER_LEN_V1 + 2
 
     @abc.abstractmethod
     def poll(self) -> list[Received]:
@@ -353,6 +366,7 @@ class MavutilLink(Link):
             if self.tlog is not None and self._owns_tlog:
                 self.tlog.close()
             raise LinkError(f"cannot open MAVLink connection {url!r}: {exc}") from exc
+        self._datagram = url.startswith(("udpin:", "udpout:", "udp:", "udpbcast:"))
         logger.info("opened MAVLink connection %s as system %d component %d", url, *self.key)
 
     def _write(self, packet: bytes) -> None:
@@ -374,7 +388,7 @@ class MavutilLink(Link):
                 break
             if isinstance(chunk, str):  # pymavlink returns "" or str on some paths
                 chunk = chunk.encode("latin-1")
-            out.extend(self._parse(self.clock(), bytes(chunk)))
+            out.extend(self._parse(self.clock(), bytes(chunk), datagram=self._datagram))
         return out
 
     def _close_transport(self) -> None:
