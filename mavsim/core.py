@@ -1,0 +1,240 @@
+"""The simulator: MAVLink bytes in, timed MAVLink packets out. No clock, no socket.
+
+Time is an integer count of microseconds since boot, advanced in fixed physics steps
+(``[sim] physics_step_s``, default 0.01 s); an ``advance_to`` that does not end on the
+grid ends with one shorter step. Incoming bytes are parsed and handled at the current
+time; their replies are stamped with it. Each step:
+
+1. the commander checks failsafes and computes the velocity command (state at step start),
+2. the vehicle is stepped, time advances,
+3. truth is updated (collisions, distances, goal),
+4. STATUSTEXTs, due telemetry of the vehicle and of every obstacle system are emitted.
+
+Packets are encoded per (link, system, component) so each link has its own sequence
+numbers, as each PX4 MAVLink instance does. Obstacle systems appear on the ``"api"``
+link only. Randomness: one ``numpy.random.Generator`` per source (vehicle estimate,
+each obstacle) spawned from ``SeedSequence(seed)``, so a seed fixes every byte.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from mavsim.autopilot import COMPID, SYSID, Autopilot, statustext
+from mavsim.errors import SimulationError
+from mavsim.obstacles import ObstacleSystem, noise_factor
+from mavsim.params import ParamStore
+from mavsim.px4 import Commander
+from mavsim.scenario import Scenario, load_scenario
+from mavsim.telemetry import TelemetryBuilder
+from mavsim.truth import Truth, TruthRecorder
+from mavsim.vehicle import VehicleParams, initial_state, step
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["Simulator", "Packet"]
+
+#: (time since boot in us, link name, raw packet bytes)
+Packet = tuple[int, str, bytes]
+#: tap(direction "in"/"out", link, time_us, packet bytes)
+Tap = Callable[[str, str, int, bytes], None]
+
+
+class Simulator:
+    """PX4-like vehicle plus scripted obstacles behind a byte interface.
+
+    Parameters
+    ----------
+    scenario : Scenario or path
+    seed : int
+        Seeds every noise source.
+    links : tuple of str
+        Link names; the first one is the offboard API link that also carries obstacles.
+    """
+
+    def __init__(self, scenario: Scenario | str | Path, seed: int = 0, links: tuple[str, ...] = ("api",)) -> None:
+        if not isinstance(scenario, Scenario):
+            scenario = load_scenario(scenario)
+        if not links:
+            raise SimulationError("at least one link is needed")
+        self.scenario = scenario
+        self.seed = int(seed)
+        self.links = tuple(links)
+        cfg = scenario.sim
+        self.now_us = 0
+        self.step_us = max(1, round(cfg.physics_step_s * 1e6))
+        seeds = np.random.SeedSequence(self.seed).spawn(1 + len(scenario.obstacles))
+        self._rng = np.random.Generator(np.random.PCG64(seeds[0]))
+        self._Lp = noise_factor(cfg.position_noise_cov_m2)
+        self._Lv = noise_factor(cfg.velocity_noise_cov_m2ps2)
+        self.vparams = VehicleParams(cfg.velocity_time_constant_s, cfg.accel_max_mps2)
+        self.vehicle = initial_state(scenario.start_ned_m, cfg.start_yaw_rad)
+        self.params = ParamStore(cfg.params)
+        self.commander = Commander(self.params, cfg.start_mode, cfg.start_armed, self.vehicle,
+                                   cfg.arming_delay_s, cfg.offboard_reject_ack)
+        tm = TelemetryBuilder(cfg.position_noise_cov_m2, cfg.velocity_noise_cov_m2ps2,
+                              cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m)
+        self.autopilot = Autopilot(self.commander, self.params, tm, self.links, cfg.stream_rates_hz, cfg.home_alt_m)
+        self.obstacles = [
+            ObstacleSystem(ob, scenario.obstacle_sysid_base + i, scenario.obstacle_compid,
+                           np.random.Generator(np.random.PCG64(seeds[1 + i])), i)
+            for i, ob in enumerate(scenario.obstacles)
+        ]
+        self.recorder = TruthRecorder(scenario)
+        self.stats: Counter[str] = Counter()
+        self.taps: list[Tap] = []
+        self._parsers = {link: self._new_parser() for link in self.links}
+        self._encoders: dict[tuple[str, int, int], mavlink2.MAVLink] = {}
+        self._pending: list[Packet] = []
+        self._est_t = -1
+        self._est = (np.zeros(3), np.zeros(3))
+        self.recorder.update(0.0, self.vehicle.position_ned_m, self._obstacle_positions(0))
+        self._emit_due()
+
+    # ------------------------------------------------------------------ helpers
+    @staticmethod
+    def _new_parser() -> mavlink2.MAVLink:
+        p = mavlink2.MAVLink(file=None, srcSystem=SYSID, srcComponent=COMPID)
+        p.robust_parsing = True  # bad CRC / prefix -> BAD_DATA instead of an exception
+        return p
+
+    @property
+    def time_s(self) -> float:
+        """Simulated seconds since boot."""
+        return self.now_us * 1e-6
+
+    def _estimate(self) -> tuple[np.ndarray, np.ndarray]:
+        """Noisy (position, velocity) estimate, sampled once per time instant."""
+        if self._est_t != self.now_us:
+            w = self._rng.standard_normal(6)
+            v = self.vehicle
+            self._est = (v.position_ned_m + self._Lp @ w[:3], v.velocity_ned_mps + self._Lv @ w[3:])
+            self._est_t = self.now_us
+        return self._est
+
+    def _obstacle_positions(self, now_us: int) -> np.ndarray:
+        return np.array([o.track.state(now_us * 1e-6)[0] for o in self.obstacles]).reshape(-1, 3)
+
+    def _encode(self, link: str, sysid: int, compid: int, msg) -> bytes:
+        key = (link, sysid, compid)
+        mav = self._encoders.get(key)
+        if mav is None:
+            mav = self._encoders[key] = mavlink2.MAVLink(file=None, srcSystem=sysid, srcComponent=compid)
+        buf = bytes(msg.pack(mav))
+        mav.seq = (mav.seq + 1) % 256
+        return buf
+
+    def _send(self, link: str, sysid: int, compid: int, msg) -> None:
+        data = self._encode(link, sysid, compid, msg)
+        self._pending.append((self.now_us, link, data))
+        self.stats["packets_sent"] += 1
+        for tap in self.taps:
+            tap("out", link, self.now_us, data)
+
+    def _flush_texts(self) -> None:
+        texts = self.commander.texts
+        if texts:
+            for severity, text in texts:
+                msg = statustext(severity, text)
+                for link in self.links:
+                    self._send(link, SYSID, COMPID, msg)
+            texts.clear()
+
+    def _emit_due(self) -> None:
+        self._flush_texts()
+        for link, msg in self.autopilot.streams_due(self.now_us, self.vehicle, self._estimate):
+            self._send(link, SYSID, COMPID, msg)
+        api = self.links[0]
+        for ob in self.obstacles:
+            for msg in ob.due(self.now_us):
+                self._send(api, ob.sysid, ob.compid, msg)
+
+    # ------------------------------------------------------------------ public
+    def receive(self, data: bytes, link: str | None = None) -> None:
+        """Bytes from a client on ``link`` (default: the API link), any chunking.
+
+        Complete packets are handled at the current time; garbage, bad CRCs and
+        truncated packets are counted and dropped, never raised.
+        """
+        link = link or self.links[0]
+        parser = self._parsers[link]
+        try:
+            msgs = parser.parse_buffer(bytes(data)) or []
+        except Exception as exc:  # pymavlink raises on some malformed input even in robust mode
+            logger.warning("parse error on %s: %s", link, exc)
+            self.stats["parse_errors"] += 1
+            self._parsers[link] = self._new_parser()
+            return
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA":
+                self.stats["bad_data"] += 1
+                continue
+            self.stats["packets_received"] += 1
+            raw = bytes(msg.get_msgbuf())
+            for tap in self.taps:
+                tap("in", link, self.now_us, raw)
+            try:
+                replies = self.autopilot.handle(msg, link, self.now_us, self.vehicle, self._estimate)
+            except Exception:  # a handler bug must not kill the vehicle; log it loudly
+                logger.exception("error handling %s", msg.get_type())
+                self.stats["handler_errors"] += 1
+                continue
+            for out_link, reply in replies:
+                self._send(out_link, SYSID, COMPID, reply)
+        self._flush_texts()
+
+    def advance_to(self, t_us: int) -> list[Packet]:
+        """Run until ``t_us`` (us since boot); return the packets sent meanwhile, in order."""
+        if t_us < self.now_us:
+            raise SimulationError(f"cannot go back in time from {self.now_us} us to {t_us} us")
+        while self.now_us < t_us:
+            h = min(self.step_us, t_us - self.now_us)
+            dt = h * 1e-6
+            cmd = self.commander.update(self.now_us * 1e-6, dt, self.vehicle)
+            self.vehicle = step(self.vehicle, cmd, dt, self.vparams)
+            self.now_us += h
+            self.recorder.update(self.now_us * 1e-6, self.vehicle.position_ned_m,
+                                 self._obstacle_positions(self.now_us))
+            self._emit_due()
+        out, self._pending = self._pending, []
+        return out
+
+    def drain(self) -> list[Packet]:
+        """Packets queued since the last call (e.g. replies to :meth:`receive`)."""
+        out, self._pending = self._pending, []
+        return out
+
+    @property
+    def truth(self) -> Truth:
+        """True state now."""
+        t = self.now_us * 1e-6
+        pos, vel = {}, {}
+        for o in self.obstacles:
+            p, v = o.track.state(t)
+            pos[o.name], vel[o.name] = p, v
+        v = self.vehicle
+        return Truth(t, v.position_ned_m.copy(), v.velocity_ned_mps.copy(), v.yaw_rad, v.on_ground,
+                     self.commander.armed, self.commander.mode, pos, vel)
+
+    def summary(self) -> dict:
+        """JSON-serialisable run summary: truth metrics, final state, link statistics."""
+        v = self.vehicle
+        out = {
+            "scenario": self.scenario.name,
+            "seed": self.seed,
+            "sim_time_s": self.time_s,
+            **self.recorder.summary(),
+            "final_position_ned_m": [float(x) for x in v.position_ned_m],
+            "final_mode": self.commander.mode,
+            "armed": self.commander.armed,
+            "mode_changes": [{"t_s": round(t, 6), "mode": m} for t, m in self.commander.mode_changes],
+            "link": {**{k: int(n) for k, n in sorted(self.stats.items())},
+                     **{k: int(n) for k, n in sorted(self.autopilot.stats.items())}},
+        }
+        return out

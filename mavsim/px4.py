@@ -1,0 +1,327 @@
+"""PX4 commander behaviour: flight modes, arming, the offboard contract, failsafe.
+
+Pure and clock-free: every call takes the simulated time ``now_s`` and the true
+vehicle state. Messages to the ground station (STATUSTEXT) are queued in
+:attr:`Commander.texts` for the caller to send.
+
+Imitated (see ``PX4_OFFBOARD.md``):
+
+- custom_mode = (main << 16) | (sub << 24); base_mode 1 + 128 armed + mode flags
+  (AUTO 4|8|16, POSCTL 64|16, OFFBOARD 16); system_status 3 standby, 4 active,
+  5 critical while a failsafe is active.
+- OFFBOARD needs a setpoint stream (a setpoint younger than COM_OF_LOSS_T) unless the
+  vehicle is disarmed; refused in flight with ACK ``offboard_reject_ack`` (0 as PX4
+  main), the mode unchanged and "Switching to Offboard is currently not available".
+- Arming in OFFBOARD needs the stream. No disarm in the air (except force, 21196).
+  Auto-disarm COM_DISARM_PRFLT after arming without takeoff, COM_DISARM_LAND after landing.
+- Setpoint loss in OFFBOARD while armed: after COM_OF_LOSS_T the vehicle leaves for the
+  COM_OBL_RC_ACT fallback (0-2 Position hold, 3 Return, 4 Land, 5 Hold, 6-7 Land) and
+  never re-enters OFFBOARD by itself. No failsafe while disarmed.
+- Takeoff climbs at MPC_TKO_SPEED to the target, then AUTO.LOITER.
+
+Deviations: POSCTL behaves as position hold with centred sticks (real PX4 without RC
+refuses it); RTL flies home at the current altitude (no climb to RTL_RETURN_ALT), then
+descends in AUTO.RTL.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mavsim.params import ParamStore
+from mavsim.vehicle import VehicleCommand, VehicleState
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["Commander", "OffboardSetpoint", "MODES", "mode_from_custom", "MAV_RESULT"]
+
+#: PX4 mode name -> (main mode, sub mode).
+MODES: dict[str, tuple[int, int]] = {
+    "POSCTL": (3, 0),
+    "AUTO.TAKEOFF": (4, 2),
+    "AUTO.LOITER": (4, 3),
+    "AUTO.RTL": (4, 5),
+    "AUTO.LAND": (4, 6),
+    "OFFBOARD": (6, 0),
+}
+_MODE_BY_NUMBER = {v: k for k, v in MODES.items()}
+#: Names PX4 uses in its messages.
+DISPLAY = {"POSCTL": "Position", "AUTO.TAKEOFF": "Takeoff", "AUTO.LOITER": "Hold", "AUTO.RTL": "Return",
+           "AUTO.LAND": "Land", "OFFBOARD": "Offboard"}
+_MAIN_DISPLAY = {1: "Manual", 2: "Altitude", 3: "Position", 4: "Auto", 5: "Acro", 6: "Offboard",
+                 7: "Stabilized", 8: "Rattitude"}
+_AUTO_SUB_DISPLAY = {0: "Mission", 1: "Ready", 4: "Mission", 7: "Follow target", 8: "Precision land"}
+
+
+class MAV_RESULT:  # noqa: N801 (MAVLink enum name)
+    ACCEPTED = 0
+    TEMPORARILY_REJECTED = 1
+    DENIED = 2
+    UNSUPPORTED = 3
+    FAILED = 4
+
+
+SEV_CRITICAL, SEV_WARNING, SEV_NOTICE, SEV_INFO = 2, 4, 5, 6
+POS_GAIN_PER_S = 1.0  # position-error to velocity gain (PX4 MPC_XY_P 0.95, MPC_Z_P 1.0)
+_FALLBACK = {0: "POSCTL", 1: "POSCTL", 2: "POSCTL", 3: "AUTO.RTL", 4: "AUTO.LAND", 5: "AUTO.LOITER",
+             6: "AUTO.LAND", 7: "AUTO.LAND"}
+
+
+def mode_from_custom(main: int, sub: int) -> str | None:
+    """Mode name for PX4 (main, sub); AUTO with sub 0 is not a mode mavsim flies."""
+    if main != 4:
+        sub = 0
+    return _MODE_BY_NUMBER.get((main, sub))
+
+
+def _display(main: int, sub: int) -> str:
+    name = mode_from_custom(main, sub)
+    if name:
+        return DISPLAY[name]
+    if main == 4:
+        return _AUTO_SUB_DISPLAY.get(sub, "Auto")
+    return _MAIN_DISPLAY.get(main, f"mode {main}")
+
+
+@dataclass(frozen=True)
+class OffboardSetpoint:
+    """An accepted offboard setpoint in LOCAL_NED; NaN marks an ignored field.
+
+    position_ned_m (m), velocity_ned_mps (m/s), accel_ned_mps2 (m/s^2): ndarray (3,);
+    yaw_rad, yaw_rate_radps: float (NaN if ignored).
+    """
+
+    position_ned_m: np.ndarray
+    velocity_ned_mps: np.ndarray
+    accel_ned_mps2: np.ndarray
+    yaw_rad: float
+    yaw_rate_radps: float
+
+
+class Commander:
+    """Mode, arming and failsafe logic of the autopilot.
+
+    Parameters
+    ----------
+    params : ParamStore
+    mode : str
+        Initial mode (a key of :data:`MODES`).
+    armed : bool
+        Initially armed.
+    vehicle : VehicleState
+        Initial true state (the hold point is taken from it).
+    arming_delay_s : float
+        Arming is denied before this simulated time.
+    offboard_reject_ack : int
+        ACK result when OFFBOARD is refused for lack of a stream.
+    """
+
+    def __init__(self, params: ParamStore, mode: str, armed: bool, vehicle: VehicleState,
+                 arming_delay_s: float = 0.0, offboard_reject_ack: int = 0) -> None:
+        self.params = params
+        self.mode = mode
+        self.armed = armed
+        self.failsafe = False
+        self.arming_delay_s = arming_delay_s
+        self.offboard_reject_ack = offboard_reject_ack
+        self.setpoint: OffboardSetpoint | None = None
+        self.last_setpoint_s = -math.inf
+        self.hold_point = vehicle.position_ned_m.copy()
+        self.takeoff_z = min(vehicle.position_ned_m[2], -params["MIS_TAKEOFF_ALT"])
+        # An airborne spawn that is not armed is held in place, as on a stand, until armed.
+        self.on_stand = not armed and not vehicle.on_ground
+        self.arm_time_s = 0.0 if armed else -math.inf
+        self.was_airborne = not vehicle.on_ground
+        self.landed_since_s: float | None = None
+        self.texts: list[tuple[int, str]] = []
+        self.mode_changes: list[tuple[float, str]] = [(0.0, mode)]
+        self._acc_integrator = np.zeros(3)
+        self._enter(mode, vehicle, 0.0)
+
+    # ------------------------------------------------------------------ encoding
+    @property
+    def custom_mode(self) -> int:
+        main, sub = MODES[self.mode]
+        return (main << 16) | (sub << 24)
+
+    @property
+    def base_mode(self) -> int:
+        main, _ = MODES[self.mode]
+        flags = {3: 64 | 16, 4: 4 | 8 | 16, 6: 16}[main]
+        return 1 | flags | (128 if self.armed else 0)
+
+    @property
+    def system_status(self) -> int:
+        if not self.armed:
+            return 3
+        return 5 if self.failsafe else 4
+
+    def offboard_signal(self, now_s: float) -> bool:
+        """True while the newest accepted setpoint is younger than COM_OF_LOSS_T."""
+        return now_s - self.last_setpoint_s <= self.params["COM_OF_LOSS_T"]
+
+    # ------------------------------------------------------------------ requests
+    def _say(self, severity: int, text: str) -> None:
+        logger.info("STATUSTEXT %d: %s", severity, text)
+        self.texts.append((severity, text))
+
+    def _enter(self, mode: str, vehicle: VehicleState, now_s: float) -> None:
+        if mode != self.mode:
+            self.mode_changes.append((now_s, mode))
+            logger.info("t=%.2f mode %s -> %s", now_s, self.mode, mode)
+        self.mode = mode
+        p = vehicle.position_ned_m
+        self.hold_point = p.copy()
+        if mode == "OFFBOARD":
+            self._acc_integrator = vehicle.velocity_ned_mps.copy()
+
+    def request_mode(self, main: int, sub: int, now_s: float, vehicle: VehicleState) -> int:
+        """A mode change asked by MAV_CMD_DO_SET_MODE or SET_MODE; returns the MAV_RESULT."""
+        name = mode_from_custom(main, sub)
+        if name is None:
+            # Manual-input modes (no RC here) and missions (none loaded) are not available.
+            self._say(SEV_CRITICAL, f"Switching to {_display(main, sub)} is currently not available")
+            return MAV_RESULT.ACCEPTED
+        if name == "OFFBOARD" and self.armed and not self.offboard_signal(now_s):
+            self._say(SEV_CRITICAL, "Switching to Offboard is currently not available")
+            return self.offboard_reject_ack
+        if name == "AUTO.TAKEOFF" and self.mode != "AUTO.TAKEOFF":
+            self.takeoff_z = min(vehicle.position_ned_m[2], -self.params["MIS_TAKEOFF_ALT"])
+        self.failsafe = False
+        self._enter(name, vehicle, now_s)
+        return MAV_RESULT.ACCEPTED
+
+    def request_takeoff(self, rel_alt_m: float, now_s: float, vehicle: VehicleState) -> int:
+        """MAV_CMD_NAV_TAKEOFF to ``rel_alt_m`` above home (NaN: MIS_TAKEOFF_ALT)."""
+        alt = self.params["MIS_TAKEOFF_ALT"] if not math.isfinite(rel_alt_m) else rel_alt_m
+        if not 0.0 < alt <= 1000.0:
+            self._say(SEV_CRITICAL, "Takeoff denied: altitude out of range")
+            return MAV_RESULT.DENIED
+        self.failsafe = False
+        self._enter("AUTO.TAKEOFF", vehicle, now_s)
+        self.takeoff_z = min(vehicle.position_ned_m[2], -alt)
+        return MAV_RESULT.ACCEPTED
+
+    def request_arm(self, arm: bool, force: bool, now_s: float, vehicle: VehicleState) -> int:
+        """MAV_CMD_COMPONENT_ARM_DISARM; returns the MAV_RESULT."""
+        if arm:
+            if self.armed:
+                return MAV_RESULT.ACCEPTED
+            if now_s < self.arming_delay_s and not force:
+                self._say(SEV_CRITICAL, "Arming denied: Resolve system health failures first")
+                return MAV_RESULT.TEMPORARILY_REJECTED
+            if self.mode == "OFFBOARD" and not self.offboard_signal(now_s):
+                self._say(SEV_CRITICAL, "Arming denied: No offboard signal")
+                return MAV_RESULT.TEMPORARILY_REJECTED
+            self.armed = True
+            self.on_stand = False
+            self.arm_time_s = now_s
+            self.was_airborne = not vehicle.on_ground
+            self.landed_since_s = None
+            self.hold_point = vehicle.position_ned_m.copy()
+            self._say(SEV_INFO, "Armed by external command")
+            return MAV_RESULT.ACCEPTED
+        if not self.armed:
+            return MAV_RESULT.ACCEPTED
+        if not vehicle.on_ground and not force:
+            self._say(SEV_CRITICAL, "Disarming denied: not landed")
+            return MAV_RESULT.TEMPORARILY_REJECTED
+        self._disarm("Disarmed by external command")
+        return MAV_RESULT.ACCEPTED
+
+    def _disarm(self, why: str) -> None:
+        self.armed = False
+        self.failsafe = False
+        self._say(SEV_INFO, why)
+
+    def accept_setpoint(self, sp: OffboardSetpoint, now_s: float) -> None:
+        """Store a validated setpoint; it is proof of life and applies in OFFBOARD."""
+        self.setpoint = sp
+        self.last_setpoint_s = now_s
+
+    # ------------------------------------------------------------------ control
+    def update(self, now_s: float, dt: float, vehicle: VehicleState) -> VehicleCommand:
+        """Run failsafe and auto-disarm checks, then return this step's command."""
+        p = vehicle.position_ned_m
+        if self.armed:
+            self._checks(now_s, vehicle)
+        if not self.armed:
+            # Disarmed: no thrust, except that an airborne spawn is held as on a stand.
+            return VehicleCommand(np.zeros(3), motors_on=self.on_stand)
+        yaw = yaw_rate = None
+        if self.mode == "OFFBOARD" and self.setpoint is not None:
+            v, yaw, yaw_rate = self._offboard(dt, vehicle)
+        elif self.mode == "AUTO.TAKEOFF":
+            v = POS_GAIN_PER_S * (self.hold_point - p)
+            err = self.takeoff_z - p[2]
+            v[2] = max(-self.params["MPC_TKO_SPEED"], min(0.0, 2.0 * err))
+            if err > -0.05:
+                self._say(SEV_INFO, "Takeoff complete")
+                self._enter("AUTO.LOITER", vehicle, now_s)
+                self.hold_point[2] = self.takeoff_z
+        elif self.mode == "AUTO.LAND":
+            v = POS_GAIN_PER_S * (self.hold_point - p)
+            v[2] = self.params["MPC_LAND_SPEED"]
+        elif self.mode == "AUTO.RTL":
+            d = -p[:2]
+            dist = float(np.hypot(d[0], d[1]))
+            v = np.zeros(3)
+            if dist > 0.5:
+                v[:2] = d / dist * min(self.params["MPC_XY_CRUISE"], POS_GAIN_PER_S * dist)
+            else:
+                v[:2] = POS_GAIN_PER_S * d
+                v[2] = self.params["MPC_LAND_SPEED"]
+        else:  # POSCTL, AUTO.LOITER, OFFBOARD before any setpoint: hold
+            v = POS_GAIN_PER_S * (self.hold_point - p)
+        return VehicleCommand(self._limit(v), yaw, yaw_rate, True)
+
+    def _limit(self, v: np.ndarray) -> np.ndarray:
+        vmax = self.params["MPC_XY_VEL_MAX"]
+        h = math.hypot(v[0], v[1])
+        if h > vmax:
+            v = v.copy()
+            v[:2] *= vmax / h
+        v[2] = min(max(v[2], -self.params["MPC_Z_VEL_MAX_UP"]), self.params["MPC_Z_VEL_MAX_DN"])
+        return v
+
+    def _offboard(self, dt: float, vehicle: VehicleState) -> tuple[np.ndarray, float | None, float | None]:
+        sp = self.setpoint
+        assert sp is not None
+        p = vehicle.position_ned_m
+        pos_ok = np.isfinite(sp.position_ned_m)
+        vel_ok = np.isfinite(sp.velocity_ned_mps)
+        acc_ok = np.isfinite(sp.accel_ned_mps2)
+        vel_ff = np.where(vel_ok, sp.velocity_ned_mps, 0.0)
+        self._acc_integrator = np.where(acc_ok, self._acc_integrator + np.where(acc_ok, sp.accel_ned_mps2, 0.0) * dt,
+                                        vehicle.velocity_ned_mps)
+        v = np.where(pos_ok, POS_GAIN_PER_S * (np.where(pos_ok, sp.position_ned_m, 0.0) - p) + vel_ff,
+                     np.where(vel_ok, vel_ff, np.where(acc_ok, self._acc_integrator, 0.0)))
+        yaw = sp.yaw_rad if math.isfinite(sp.yaw_rad) else None
+        rate = sp.yaw_rate_radps if math.isfinite(sp.yaw_rate_radps) else None
+        return v, yaw, rate
+
+    def _checks(self, now_s: float, vehicle: VehicleState) -> None:
+        if self.mode == "OFFBOARD" and not self.offboard_signal(now_s):
+            fallback = _FALLBACK[int(self.params["COM_OBL_RC_ACT"])]
+            self._say(SEV_CRITICAL, f"Failsafe: offboard lost, switching to {DISPLAY[fallback]}")
+            self._enter(fallback, vehicle, now_s)
+            self.failsafe = True
+        if not vehicle.on_ground:
+            self.was_airborne = True
+            self.landed_since_s = None
+            return
+        if self.was_airborne:
+            if self.landed_since_s is None:
+                self.landed_since_s = now_s
+                self._say(SEV_INFO, "Landing detected")
+            t = self.params["COM_DISARM_LAND"]
+            if t >= 0 and now_s - self.landed_since_s >= t:
+                self._disarm("Disarmed by landing")
+        else:
+            t = self.params["COM_DISARM_PRFLT"]
+            if t >= 0 and now_s - self.arm_time_s >= t:
+                self._disarm("Disarmed by auto preflight disarming")

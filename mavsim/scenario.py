@@ -1,0 +1,432 @@
+"""Scenario files (``configs/*.toml``) as mavsim reads them.
+
+mavsim owns ``[sim]`` and ``[world]`` (unknown keys there are rejected, naming file,
+section and key) and reads named keys of the shared sections: ``[scenario]`` (name,
+description, duration_s), ``[vehicle]`` (radius_m, start_ned_m), ``[mission]``
+(goal_ned_m, goal_tolerance_m) and ``[map]`` (walls, static obstacles, for collision
+truth). Sections owned by the companion (``[planner]``, ``[estimator]``, the rest of
+``[mission]``) are not inspected.
+
+``[sim]`` keys (all optional)
+-----------------------------
+velocity_time_constant_s : float, default 0.3
+    Time constant of the first-order velocity response (s).
+accel_max_mps2 : float, default 4.0
+    Bound on the norm of the vehicle acceleration (m/s^2).
+physics_step_s : float, default 0.01
+    Fixed physics step (s); ``advance`` may end on a shorter partial step.
+position_noise_cov_m2 : 3x3, default 0.001 I
+    Covariance of the Gaussian noise on reported drone positions (NED, m^2); the
+    ODOMETRY pose covariance reports exactly this matrix.
+velocity_noise_cov_m2ps2 : 3x3, default 0.001 I
+    Covariance of the noise on reported drone velocities ((m/s)^2).
+start_airborne : bool, default ``start_ned_m[2] < 0``
+    Spawn in the air, hovering. With ``false`` the start point is put on the ground.
+start_armed : bool, default ``start_airborne``
+    Spawn armed. Airborne and disarmed, the vehicle is held in place (as on a stand)
+    until armed, so a companion can use the ground flow (select OFFBOARD, arm).
+start_mode : str, default ``"AUTO.LOITER"`` airborne, ``"POSCTL"`` on the ground
+    One of POSCTL, AUTO.LOITER, AUTO.TAKEOFF, AUTO.LAND, AUTO.RTL, OFFBOARD.
+start_yaw_rad : float, default 0.0
+home_lat_deg, home_lon_deg, home_alt_m : float
+    Geodetic position of the local origin (PX4 SITL default 47.397742, 8.545594, 488.0).
+arming_delay_s : float, default 0.0
+    Arming is denied this long after boot (real PX4 needs a few seconds).
+offboard_reject_ack : int, default 0
+    COMMAND_ACK result when OFFBOARD is refused for lack of a setpoint stream (PX4
+    main answers 0 and keeps the mode; older builds answer 1).
+params : table, default {}
+    Overrides of PX4 parameters (see :mod:`mavsim.params`), e.g. ``{COM_OF_LOSS_T = 1.0}``.
+stream_rates_hz : table, default {}
+    Overrides of telemetry rates by message name, e.g. ``{ATTITUDE = 50.0}``.
+
+``[world]`` keys
+----------------
+obstacle_sysid_base : int, default 101
+obstacle_compid : int, default 197 (MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY, never 1)
+obstacles : array of tables ``[[world.obstacles]]`` with name, radius_m, start_ned_m,
+    ``velocity_ned_mps`` or (``waypoints_ned_m``, ``speed_mps``, optional ``loop``),
+    measurement_cov_m2, optional velocity_cov_m2ps2 (velocity reported only if
+    given), report_rate_hz (default 10), start_delay_s (default 0).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mavsim.errors import ScenarioError
+from mavsim.params import DEFAULT_PARAMS, check_param_value
+
+logger = logging.getLogger(__name__)
+
+__all__ = [
+    "Obstacle",
+    "Scenario",
+    "SimConfig",
+    "StaticObstacle",
+    "Wall",
+    "load_scenario",
+    "scenario_from_dict",
+    "MODE_NAMES",
+]
+
+#: Mode names accepted by ``start_mode`` (PX4 flight-mode names).
+MODE_NAMES = ("POSCTL", "AUTO.LOITER", "AUTO.TAKEOFF", "AUTO.LAND", "AUTO.RTL", "OFFBOARD")
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Vehicle physics, sensor noise and PX4 behaviour settings (``[sim]``)."""
+
+    velocity_time_constant_s: float = 0.3
+    accel_max_mps2: float = 4.0
+    physics_step_s: float = 0.01
+    position_noise_cov_m2: np.ndarray = field(default_factory=lambda: 1e-3 * np.eye(3))
+    velocity_noise_cov_m2ps2: np.ndarray = field(default_factory=lambda: 1e-3 * np.eye(3))
+    start_airborne: bool = True
+    start_armed: bool = True
+    start_mode: str = "AUTO.LOITER"
+    start_yaw_rad: float = 0.0
+    home_lat_deg: float = 47.397742
+    home_lon_deg: float = 8.545594
+    home_alt_m: float = 488.0
+    arming_delay_s: float = 0.0
+    offboard_reject_ack: int = 0
+    params: dict[str, float] = field(default_factory=dict)
+    stream_rates_hz: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A scripted obstacle (``[[world.obstacles]]``); NED metres, seconds."""
+
+    name: str
+    radius_m: float
+    start_ned_m: np.ndarray
+    velocity_ned_mps: np.ndarray | None
+    waypoints_ned_m: np.ndarray | None
+    speed_mps: float
+    loop: bool
+    measurement_cov_m2: np.ndarray
+    velocity_cov_m2ps2: np.ndarray | None
+    report_rate_hz: float
+    start_delay_s: float
+
+
+@dataclass(frozen=True)
+class Wall:
+    """Half-space ``normal . p <= offset`` is free space (unit NED normal)."""
+
+    normal_ned: np.ndarray
+    offset_m: float
+
+
+@dataclass(frozen=True)
+class StaticObstacle:
+    """A sphere that does not move (from ``[[map.static_obstacles]]``)."""
+
+    center_ned_m: np.ndarray
+    radius_m: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything mavsim reads from a scenario file."""
+
+    name: str
+    description: str
+    duration_s: float
+    vehicle_radius_m: float
+    start_ned_m: np.ndarray
+    goal_ned_m: np.ndarray | None
+    goal_tolerance_m: float
+    sim: SimConfig
+    obstacles: tuple[Obstacle, ...]
+    walls: tuple[Wall, ...]
+    static_obstacles: tuple[StaticObstacle, ...]
+    obstacle_sysid_base: int = 101
+    obstacle_compid: int = 197
+    source: str = "<dict>"
+
+
+_SIM_KEYS = {
+    "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2",
+    "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
+    "home_lat_deg", "home_lon_deg", "home_alt_m", "arming_delay_s", "offboard_reject_ack",
+    "params", "stream_rates_hz",
+}
+_WORLD_KEYS = {"obstacles", "obstacle_sysid_base", "obstacle_compid"}
+_OBSTACLE_KEYS = {
+    "name", "radius_m", "start_ned_m", "velocity_ned_mps", "waypoints_ned_m", "speed_mps", "loop",
+    "measurement_cov_m2", "velocity_cov_m2ps2", "report_rate_hz", "start_delay_s",
+}
+
+
+class _Section:
+    """Typed access to one table with errors naming file, section and key."""
+
+    def __init__(self, source: str, name: str, table: Any, allowed: set[str] | None = None) -> None:
+        if not isinstance(table, dict):
+            raise ScenarioError(f"{source}: [{name}] must be a table, got {type(table).__name__}")
+        self.source, self.name, self.table = source, name, table
+        if allowed is not None:
+            for key in table:
+                if key not in allowed:
+                    raise ScenarioError(
+                        f"{source}: [{name}] unknown key {key!r} (allowed: {', '.join(sorted(allowed))})"
+                    )
+
+    def err(self, key: str, what: str) -> ScenarioError:
+        return ScenarioError(f"{self.source}: [{self.name}] {key}: {what}")
+
+    def has(self, key: str) -> bool:
+        return key in self.table
+
+    def number(self, key: str, default: float | None = None, *, lo: float | None = None,
+               hi: float | None = None, positive: bool = False) -> float:
+        if key not in self.table:
+            if default is None:
+                raise self.err(key, "missing")
+            return float(default)
+        v = self.table[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.err(key, f"must be a finite number, got {v!r}")
+        v = float(v)
+        if positive and v <= 0:
+            raise self.err(key, f"must be > 0, got {v}")
+        if lo is not None and v < lo:
+            raise self.err(key, f"must be >= {lo}, got {v}")
+        if hi is not None and v > hi:
+            raise self.err(key, f"must be <= {hi}, got {v}")
+        return v
+
+    def integer(self, key: str, default: int, *, lo: int, hi: int) -> int:
+        v = self.table.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+            raise self.err(key, f"must be an integer in [{lo}, {hi}], got {v!r}")
+        return v
+
+    def boolean(self, key: str, default: bool) -> bool:
+        v = self.table.get(key, default)
+        if not isinstance(v, bool):
+            raise self.err(key, f"must be true or false, got {v!r}")
+        return v
+
+    def string(self, key: str, default: str | None = None) -> str:
+        if key not in self.table:
+            if default is None:
+                raise self.err(key, "missing")
+            return default
+        v = self.table[key]
+        if not isinstance(v, str):
+            raise self.err(key, f"must be a string, got {v!r}")
+        return v
+
+    def vector3(self, key: str, default: Any = None) -> np.ndarray:
+        if key not in self.table:
+            if default is None:
+                raise self.err(key, "missing")
+            return np.array(default, dtype=float)
+        try:
+            a = np.array(self.table[key], dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise self.err(key, f"must be 3 numbers: {exc}") from None
+        if a.shape != (3,) or not np.all(np.isfinite(a)):
+            raise self.err(key, f"must be 3 finite numbers, got {self.table[key]!r}")
+        return a
+
+    def covariance(self, key: str, default: Any = None) -> np.ndarray:
+        if key not in self.table:
+            if default is None:
+                raise self.err(key, "missing")
+            return np.array(default, dtype=float)
+        try:
+            a = np.array(self.table[key], dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise self.err(key, f"must be a 3x3 matrix: {exc}") from None
+        if a.shape != (3, 3) or not np.all(np.isfinite(a)):
+            raise self.err(key, f"must be a finite 3x3 matrix, got {self.table[key]!r}")
+        if not np.allclose(a, a.T, atol=1e-12):
+            raise self.err(key, "must be symmetric")
+        if np.linalg.eigvalsh(a).min() < -1e-12:
+            raise self.err(key, "must be positive semi-definite")
+        return a
+
+    def table_of_numbers(self, key: str) -> dict[str, float]:
+        v = self.table.get(key, {})
+        if not isinstance(v, dict):
+            raise self.err(key, "must be a table")
+        out = {}
+        for k, x in v.items():
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                raise self.err(f"{key}.{k}", f"must be a finite number, got {x!r}")
+            out[k] = float(x)
+        return out
+
+
+def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
+    s = _Section(src, "sim", raw, _SIM_KEYS)
+    airborne = s.boolean("start_airborne", start_z < 0)
+    mode = s.string("start_mode", "AUTO.LOITER" if airborne else "POSCTL")
+    if mode not in MODE_NAMES:
+        raise s.err("start_mode", f"must be one of {', '.join(MODE_NAMES)}, got {mode!r}")
+    params = s.table_of_numbers("params")
+    for name, value in params.items():
+        if name not in DEFAULT_PARAMS:
+            raise s.err(f"params.{name}", f"unknown parameter (known: {', '.join(sorted(DEFAULT_PARAMS))})")
+        problem = check_param_value(name, value)
+        if problem:
+            raise s.err(f"params.{name}", problem)
+    from mavsim.telemetry import DEFAULT_RATES_HZ  # local: telemetry imports scenario types
+
+    rates = s.table_of_numbers("stream_rates_hz")
+    for name, rate in rates.items():
+        if name not in DEFAULT_RATES_HZ:
+            raise s.err(f"stream_rates_hz.{name}", f"unknown stream (known: {', '.join(DEFAULT_RATES_HZ)})")
+        if not 0.0 <= rate <= 1000.0:
+            raise s.err(f"stream_rates_hz.{name}", f"must be in [0, 1000] Hz, got {rate}")
+    return SimConfig(
+        velocity_time_constant_s=s.number("velocity_time_constant_s", 0.3, positive=True),
+        accel_max_mps2=s.number("accel_max_mps2", 4.0, positive=True),
+        physics_step_s=s.number("physics_step_s", 0.01, lo=1e-4, hi=0.1),
+        position_noise_cov_m2=s.covariance("position_noise_cov_m2", 1e-3 * np.eye(3)),
+        velocity_noise_cov_m2ps2=s.covariance("velocity_noise_cov_m2ps2", 1e-3 * np.eye(3)),
+        start_airborne=airborne,
+        start_armed=s.boolean("start_armed", airborne),
+        start_mode=mode,
+        start_yaw_rad=s.number("start_yaw_rad", 0.0),
+        home_lat_deg=s.number("home_lat_deg", 47.397742, lo=-89.0, hi=89.0),
+        home_lon_deg=s.number("home_lon_deg", 8.545594, lo=-180.0, hi=180.0),
+        home_alt_m=s.number("home_alt_m", 488.0, lo=-500.0, hi=9000.0),
+        arming_delay_s=s.number("arming_delay_s", 0.0, lo=0.0, hi=60.0),
+        offboard_reject_ack=s.integer("offboard_reject_ack", 0, lo=0, hi=4),
+        params=params,
+        stream_rates_hz=rates,
+    )
+
+
+def _obstacle(src: str, index: int, raw: Any) -> Obstacle:
+    s = _Section(src, f"world.obstacles[{index}]", raw, _OBSTACLE_KEYS)
+    has_v, has_w = s.has("velocity_ned_mps"), s.has("waypoints_ned_m")
+    if has_v == has_w:
+        raise s.err("velocity_ned_mps", "give exactly one of velocity_ned_mps or waypoints_ned_m")
+    waypoints = None
+    if has_w:
+        try:
+            waypoints = np.array(s.table["waypoints_ned_m"], dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise s.err("waypoints_ned_m", f"must be a list of 3-vectors: {exc}") from None
+        if waypoints.ndim != 2 or waypoints.shape[1] != 3 or len(waypoints) == 0 or not np.all(np.isfinite(waypoints)):
+            raise s.err("waypoints_ned_m", "must be a non-empty list of finite 3-vectors")
+        if not s.has("speed_mps"):
+            raise s.err("speed_mps", "missing (needed with waypoints_ned_m)")
+    elif s.has("speed_mps") or s.has("loop"):
+        raise s.err("speed_mps", "speed_mps and loop go with waypoints_ned_m only")
+    vel_cov = s.covariance("velocity_cov_m2ps2") if s.has("velocity_cov_m2ps2") else None
+    return Obstacle(
+        name=s.string("name", f"obs{index + 1}"),
+        radius_m=s.number("radius_m", 0.5, lo=0.0),
+        start_ned_m=s.vector3("start_ned_m"),
+        velocity_ned_mps=s.vector3("velocity_ned_mps") if has_v else None,
+        waypoints_ned_m=waypoints,
+        speed_mps=s.number("speed_mps", 1.0, positive=True) if has_w else 0.0,
+        loop=s.boolean("loop", False),
+        measurement_cov_m2=s.covariance("measurement_cov_m2", 1e-3 * np.eye(3)),
+        velocity_cov_m2ps2=vel_cov,
+        report_rate_hz=s.number("report_rate_hz", 10.0, lo=0.1, hi=200.0),
+        start_delay_s=s.number("start_delay_s", 0.0, lo=0.0),
+    )
+
+
+def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario:
+    """Build a :class:`Scenario` from parsed TOML (``tomllib.load`` output).
+
+    Raises
+    ------
+    ScenarioError
+        On a bad section, key or value; the message names ``source``, section and key.
+    """
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{source}: top level must be a table")
+    sc = _Section(source, "scenario", data.get("scenario", {}))
+    veh = _Section(source, "vehicle", data.get("vehicle", {}))
+    mission = _Section(source, "mission", data.get("mission", {}))
+    start = veh.vector3("start_ned_m", [0.0, 0.0, 0.0])
+    sim = _sim_config(source, data.get("sim", {}), float(start[2]))
+    if not sim.start_airborne:
+        start = np.array([start[0], start[1], 0.0])
+    elif start[2] >= 0:
+        raise veh.err("start_ned_m", "start_airborne = true needs z < 0 (NED, z down)")
+    world = _Section(source, "world", data.get("world", {}), _WORLD_KEYS)
+    raw_obs = world.table.get("obstacles", [])
+    if not isinstance(raw_obs, list):
+        raise world.err("obstacles", "must be an array of tables [[world.obstacles]]")
+    obstacles = tuple(_obstacle(source, i, o) for i, o in enumerate(raw_obs))
+    names = [o.name for o in obstacles]
+    if len(set(names)) != len(names):
+        raise world.err("obstacles", f"obstacle names must be unique, got {names}")
+    sysid_base = world.integer("obstacle_sysid_base", 101, lo=2, hi=255)
+    if sysid_base + len(obstacles) - 1 > 255:
+        raise world.err("obstacle_sysid_base", "too many obstacles for the system id range")
+    compid = world.integer("obstacle_compid", 197, lo=2, hi=255)
+    mp = _Section(source, "map", data.get("map", {}))
+    walls = []
+    for i, w in enumerate(mp.table.get("walls", [])):
+        ws = _Section(source, f"map.walls[{i}]", w)
+        n = ws.vector3("normal_ned")
+        norm = float(np.linalg.norm(n))
+        if norm < 1e-9:
+            raise ws.err("normal_ned", "must be non-zero")
+        walls.append(Wall(normal_ned=n / norm, offset_m=ws.number("offset_m") / norm))
+    statics = []
+    for i, o in enumerate(mp.table.get("static_obstacles", [])):
+        os_ = _Section(source, f"map.static_obstacles[{i}]", o)
+        statics.append(StaticObstacle(os_.vector3("center_ned_m"), os_.number("radius_m", lo=0.0)))
+    goal = mission.vector3("goal_ned_m") if mission.has("goal_ned_m") else None
+    return Scenario(
+        name=sc.string("name", Path(source).stem if source != "<dict>" else "scenario"),
+        description=sc.string("description", ""),
+        duration_s=sc.number("duration_s", 60.0, positive=True),
+        vehicle_radius_m=veh.number("radius_m", 0.5, lo=0.0),
+        start_ned_m=start,
+        goal_ned_m=goal,
+        goal_tolerance_m=mission.number("goal_tolerance_m", 0.5, positive=True),
+        sim=sim,
+        obstacles=obstacles,
+        walls=tuple(walls),
+        static_obstacles=tuple(statics),
+        obstacle_sysid_base=sysid_base,
+        obstacle_compid=compid,
+        source=source,
+    )
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario file.
+
+    Raises
+    ------
+    ScenarioError
+        If the file cannot be read or parsed, or a section, key or value is bad.
+    """
+    p = Path(path)
+    try:
+        with p.open("rb") as f:
+            data = tomllib.load(f)
+    except OSError as exc:
+        raise ScenarioError(f"{p}: cannot read scenario file: {exc.strerror or exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{p}: not valid TOML: {exc}") from None
+    return scenario_from_dict(data, str(p))
+
+
+def default_scenario() -> Scenario:
+    """A scenario with no obstacles, the vehicle on the ground at the origin."""
+    return scenario_from_dict({"scenario": {"name": "default"}})

@@ -1,0 +1,155 @@
+"""PX4 telemetry: the messages a PX4 vehicle streams, built from simulated state.
+
+Rates follow PX4's defaults on the offboard link (``DEFAULT_RATES_HZ``); a client
+changes them per link with MAV_CMD_SET_MESSAGE_INTERVAL. Timestamps are simulated
+time since boot (``time_boot_ms`` ms, ``time_usec`` us). Reported positions and
+velocities are the noisy estimate; ODOMETRY carries the noise covariance itself
+(position block of ``pose_covariance`` and velocity block of ``velocity_covariance``,
+row-major upper triangle of 6x6: x, y, z variances at indices 0, 6, 11; the full 3x3
+block is filled, so off-diagonal noise terms are reported too).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from mavsim.px4 import Commander
+from mavsim.vehicle import VehicleState
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["DEFAULT_RATES_HZ", "STREAM_IDS", "TelemetryBuilder", "odometry_message", "upper_triangle_6x6"]
+
+#: Stream name -> default rate (Hz).
+DEFAULT_RATES_HZ: dict[str, float] = {
+    "HEARTBEAT": 1.0,
+    "SYS_STATUS": 5.0,
+    "EXTENDED_SYS_STATE": 5.0,
+    "LOCAL_POSITION_NED": 30.0,
+    "ODOMETRY": 30.0,
+    "ATTITUDE": 30.0,
+    "GLOBAL_POSITION_INT": 50.0,
+    "HOME_POSITION": 0.5,
+}
+#: Stream name -> MAVLink message id.
+STREAM_IDS: dict[str, int] = {
+    "HEARTBEAT": 0, "SYS_STATUS": 1, "ATTITUDE": 30, "LOCAL_POSITION_NED": 32, "GLOBAL_POSITION_INT": 33,
+    "HOME_POSITION": 242, "EXTENDED_SYS_STATE": 245, "ODOMETRY": 331,
+}
+MSG_AUTOPILOT_VERSION = 148
+
+MAV_TYPE_QUADROTOR = 2
+MAV_AUTOPILOT_PX4 = 12
+EARTH_RADIUS_M = 6378137.0
+# gyro | accel | mag | abs pressure | GPS | angular rate ctl | attitude ctl | yaw pos | z/alt ctl | xy ctl | motors
+_SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x2000 | 0x4000 | 0x8000
+_PREARM = 0x10000000
+# MAV_PROTOCOL_CAPABILITY: MISSION_FLOAT 1, PARAM_FLOAT 2, MISSION_INT 4, COMMAND_INT 8,
+# SET_POSITION_TARGET_LOCAL_NED 128, SET_POSITION_TARGET_GLOBAL_INT 256, MAVLINK2 8192
+_CAPABILITIES = 1 | 2 | 4 | 8 | 128 | 8192
+
+
+def upper_triangle_6x6(block3: np.ndarray, rest: float = 0.0) -> list[float]:
+    """21 floats of a 6x6 row-major upper triangle with ``block3`` in the top-left 3x3.
+
+    ``rest`` fills the diagonal of the lower-right block (e.g. NaN for unknown attitude).
+    """
+    m = np.zeros((6, 6))
+    m[:3, :3] = block3
+    m[3, 3] = m[4, 4] = m[5, 5] = rest
+    return [float(m[i, j]) for i in range(6) for j in range(i, 6)]
+
+
+def _yaw_quat(roll: float, pitch: float, yaw: float) -> list[float]:
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return [cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy]
+
+
+def odometry_message(time_us: int, pos: np.ndarray, vel: np.ndarray, q: list[float],
+                     rates: tuple[float, float, float], pose_cov: list[float], vel_cov: list[float],
+                     estimator_type: int) -> mavlink2.MAVLink_odometry_message:
+    """ODOMETRY in LOCAL_NED (frame_id = child_frame_id = 1), velocity in NED."""
+    return mavlink2.MAVLink_odometry_message(
+        time_us, 1, 1, float(pos[0]), float(pos[1]), float(pos[2]), q,
+        float(vel[0]), float(vel[1]), float(vel[2]), rates[0], rates[1], rates[2],
+        pose_cov, vel_cov, 0, estimator_type, 100)
+
+
+class TelemetryBuilder:
+    """Builds the autopilot's telemetry messages.
+
+    Parameters
+    ----------
+    position_cov_m2, velocity_cov_m2ps2 : ndarray (3, 3)
+        Noise covariances of the reported estimate (reported in ODOMETRY).
+    home_lat_deg, home_lon_deg, home_alt_m : float
+        Geodetic position of the local origin (NED (0, 0, 0), on the ground).
+    """
+
+    def __init__(self, position_cov_m2: np.ndarray, velocity_cov_m2ps2: np.ndarray,
+                 home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> None:
+        self._pose_cov = upper_triangle_6x6(position_cov_m2, 1e-4)
+        self._vel_cov = upper_triangle_6x6(velocity_cov_m2ps2, 1e-4)
+        self.home = (home_lat_deg, home_lon_deg, home_alt_m)
+        self._cos_lat = math.cos(math.radians(home_lat_deg))
+
+    def global_from_local(self, p: np.ndarray) -> tuple[int, int, int]:
+        """(lat degE7, lon degE7, alt mm AMSL) of a local NED point (flat earth)."""
+        lat = self.home[0] + math.degrees(p[0] / EARTH_RADIUS_M)
+        lon = self.home[1] + math.degrees(p[1] / (EARTH_RADIUS_M * self._cos_lat))
+        return round(lat * 1e7), round(lon * 1e7), round((self.home[2] - p[2]) * 1000)
+
+    def build(self, msg_id: int, now_us: int, cmdr: Commander, veh: VehicleState,
+              est_pos: np.ndarray, est_vel: np.ndarray):
+        """The message with id ``msg_id`` at simulated time ``now_us``, or None if unknown."""
+        ms = now_us // 1000
+        if msg_id == 0:
+            return mavlink2.MAVLink_heartbeat_message(
+                MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_PX4, cmdr.base_mode, cmdr.custom_mode, cmdr.system_status, 3)
+        if msg_id == 32:
+            return mavlink2.MAVLink_local_position_ned_message(
+                ms, float(est_pos[0]), float(est_pos[1]), float(est_pos[2]),
+                float(est_vel[0]), float(est_vel[1]), float(est_vel[2]))
+        if msg_id == 331:
+            roll, pitch = veh.roll_pitch_rad
+            return odometry_message(now_us, est_pos, est_vel, _yaw_quat(roll, pitch, veh.yaw_rad),
+                                    (0.0, 0.0, veh.yaw_rate_radps), self._pose_cov, self._vel_cov, 8)
+        if msg_id == 30:
+            roll, pitch = veh.roll_pitch_rad
+            return mavlink2.MAVLink_attitude_message(ms, roll, pitch, veh.yaw_rad, 0.0, 0.0, veh.yaw_rate_radps)
+        if msg_id == 33:
+            lat, lon, alt = self.global_from_local(est_pos)
+            hdg = round(math.degrees(veh.yaw_rad) % 360.0 * 100) % 36000
+            return mavlink2.MAVLink_global_position_int_message(
+                ms, lat, lon, alt, round(-est_pos[2] * 1000), *(int(round(x * 100)) for x in est_vel), hdg)
+        if msg_id == 1:
+            health = _SENSORS | _PREARM
+            return mavlink2.MAVLink_sys_status_message(health, health, health, 150, 16200, 500, 90,
+                                                       0, 0, 0, 0, 0, 0)
+        if msg_id == 245:
+            if veh.on_ground:
+                landed = 1
+            elif cmdr.mode == "AUTO.TAKEOFF":
+                landed = 3
+            elif cmdr.mode == "AUTO.LAND" or (cmdr.mode == "AUTO.RTL" and veh.velocity_ned_mps[2] > 0.3):
+                landed = 4
+            else:
+                landed = 2
+            return mavlink2.MAVLink_extended_sys_state_message(0, landed)
+        if msg_id == 242:
+            lat, lon, alt = self.global_from_local(np.zeros(3))
+            return mavlink2.MAVLink_home_position_message(lat, lon, alt, 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
+                                                          0.0, 0.0, 0.0, now_us)
+        if msg_id == MSG_AUTOPILOT_VERSION:
+            # flight_sw_version 1.15.0 official (0xFF type byte)
+            return mavlink2.MAVLink_autopilot_version_message(
+                _CAPABILITIES, (1 << 24) | (15 << 16) | (0 << 8) | 0xFF, 0, 0, 0,
+                [0] * 8, [0] * 8, [0] * 8, 0x26AC, 0x0011, 1, [0] * 18)
+        return None
