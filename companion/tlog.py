@@ -127,7 +127,7 @@ def _check_tlog(path: Path) -> None:
 
 
 def read_tlog(path: str | os.PathLike, *, include_bad: bool = False) -> Iterator[tuple[float, object]]:
-    """Iterate over ``(t_s, msg)`` of a tlog, read with pymavlink's own tlog reader.
+    """Iterate over ``(t_s, msg)`` of a tlog, read with pymavlink's own tlog reader (``mavutil.mavlogfile``).
 
     Parameters
     ----------
@@ -156,11 +156,12 @@ def read_tlog(path: str | os.PathLike, *, include_bad: bool = False) -> Iterator
     path = Path(path)
     _check_tlog(path)
     try:
-        conn = mavutil.mavlink_connection(str(path), robust_parsing=True, notimestamps=False, write=False)
+        # mavutil.mavlink_connection(path) would pick mavmmaplog, whose index
+        # building crashes on a truncated final record (pymavlink 2.4.x); its
+        # base class mavlogfile reads the same records sequentially and copes.
+        conn = mavutil.mavlogfile(str(path), robust_parsing=True)
     except (OSError, ValueError) as exc:
         raise TlogError(f"cannot open tlog {path}: {exc}") from exc
-    if not isinstance(conn, mavutil.mavlogfile):  # a .bin/.log name opened as something else
-        raise TlogError(f"{path} was not opened as a tlog by pymavlink (got {type(conn).__name__})")
     good = 0
     bad = 0
     try:
