@@ -199,8 +199,8 @@ def decode(msg: mavlink2.MAVLink_message) -> Decoded | None:
         return None
     try:
         return handler(msg)
-    except (AttributeError, TypeError, ValueError, IndexError) as exc:  # malformed object
-        return _reject(msg, f"malformed: {exc}")
+    except Exception as exc:  # a malformed message must never stop the control loop
+        return _reject(msg, f"malformed: {type(exc).__name__}: {exc}")
 
 
 def decode_heartbeat(msg: mavlink2.MAVLink_heartbeat_message) -> VehicleHeartbeat:

@@ -260,3 +260,12 @@ def test_that_command_long_counts_confirmations_and_targets():
     assert (m.target_system, m.confirmation, m.param7) == (3, 2, 0.0)
     with pytest.raises(InputError):
         M.command_long(400, range(8))
+
+
+def test_that_a_message_whose_fields_break_decoding_is_rejected_not_raised():
+    msg = wire(odometry())
+    msg.pose_covariance = [0.1] * 5  # wrong length from a broken sender
+    out = M.decode(msg)
+    assert isinstance(out, M.Rejected) and "21" in out.reason
+    msg.frame_id = None
+    assert isinstance(M.decode(msg), M.Rejected)
