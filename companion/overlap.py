@@ -430,7 +430,7 @@ def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> 
         outside = (new_u < la - slack) | (new_u > ha + slack)
         midpoint = 0.5 * (np.where(both, la, 0.0) + np.where(both, ha, 0.0))
         new_u = np.where(outside & both, midpoint, new_u)
-        new_u = np.where(outside & ~both, ua + np.clip(step, -4.0, 4.0), new_u)
+        new_u = np.where(~both, ua + np.clip(step, -4.0, 4.0), new_u)  # no two-sided bracket yet: cap every step
         u[idx] = new_u
         keep = np.abs(new_u - ua) > _U_TOL * np.maximum(1.0, np.abs(ua))
         if not np.any(keep):
