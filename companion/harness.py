@@ -1,0 +1,165 @@
+"""Run the bundled simulator and the companion together in one process, in lockstep.
+
+This is the one place where ``companion`` imports ``mavsim`` (the dependency rule's
+exception, see ``docs/ARCHITECTURE.md``): ``companion demo``, ``companion campaign`` and
+the closed-loop tests use it. The two sides exchange real MAVLink bytes through a
+:class:`~companion.link.MemoryLink`; there are no sockets and no sleeping, and the same
+seed gives the same run. Packet loss and other link faults are applied here, between
+the two sides, by dropping whole packets.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from companion.app import Companion
+from companion.link import MemoryLink
+from companion.offboard import OffboardConfig
+from companion.scenario import load_scenario
+from mavsim.lockstep import LockstepSimulator
+
+logger = logging.getLogger(__name__)
+
+#: ``drop(t_s, direction, packet) -> bool``; direction is ``"to_companion"`` or ``"to_vehicle"``.
+PacketFilter = Callable[[float, str, bytes], bool]
+
+
+@dataclass
+class RunResult:
+    """Outcome of one lockstep run: the simulator's truth and the companion's own records."""
+
+    scenario: str
+    seed: int
+    formulation: str
+    truth: dict
+    companion: Companion
+    sim_time_s: float
+    dropped_packets: int = 0
+    tlog_path: Path | None = None
+    extra: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        """The numbers ``companion demo`` prints (JSON-serialisable)."""
+        comp = self.companion
+        records = comp.records
+        solve = np.array([r.solve_time_s for r in records]) if records else np.zeros(0)
+        realised = [min(r.realised_contour.values()) for r in records if r.realised_contour]
+        planned = [r.planned_min_contour for r in records if np.isfinite(r.planned_min_contour)]
+        min_dist = self.truth.get("min_distance_m", {})
+        return {
+            "scenario": self.scenario,
+            "seed": self.seed,
+            "formulation": self.formulation,
+            "c_min": comp.cfg.c_min,
+            "c_max": comp.cfg.c_max,
+            "collided": bool(self.truth.get("collided")),
+            "collisions": len(self.truth.get("collisions", [])),
+            "goal_reached": bool(self.truth.get("goal_reached")),
+            "time_to_goal_s": self.truth.get("time_to_goal_s"),
+            "min_true_distance_m": min(min_dist.values()) if min_dist else None,
+            "min_true_clearance_m": min(self.truth.get("min_clearance_m", {}).values(), default=None),
+            "min_realised_contour": min(realised) if realised else None,
+            "min_planned_contour": min(planned) if planned else None,
+            "replans": len(records),
+            "solve_time_median_ms": float(np.median(solve) * 1e3) if solve.size else None,
+            "solve_time_p99_ms": float(np.percentile(solve, 99) * 1e3) if solve.size else None,
+            "replans_with_slack": comp.state.slack_plans,
+            "failed_plans": comp.state.failed_plans,
+            "stale_events": comp.state.stale_events,
+            "failsafe_events": [t for t in comp.state.events if "brak" in t[1] or "stale" in t[1] or "took over" in t[1] or "HEARTBEAT" in t[1]],
+            "final_mode": self.truth.get("final_mode"),
+            "sim_time_s": self.sim_time_s,
+            "dropped_packets": self.dropped_packets,
+        }
+
+
+def run_lockstep(
+    scenario_path: str | Path,
+    *,
+    seed: int = 0,
+    duration_s: float | None = None,
+    tlog_path: str | Path | None = None,
+    sim_tlog_path: str | Path | None = None,
+    drop: PacketFilter | None = None,
+    loss_probability: float = 0.0,
+    offboard: OffboardConfig | None = None,
+    stop_after_goal_s: float | None = 2.0,
+    inject: Callable[[float], list[bytes]] | None = None,
+    **planner_overrides,
+) -> RunResult:
+    """Fly one scenario in lockstep: ``mavsim`` and the companion over MAVLink bytes.
+
+    Parameters
+    ----------
+    scenario_path : scenario TOML file (both programs read it; the companion never reads
+        the obstacles' scripted paths).
+    seed : seeds the simulator's noise and the packet loss.
+    duration_s : simulated time limit (default: the scenario's ``duration_s``).
+    tlog_path : record the companion's link as a tlog (what ``companion replay`` reads).
+    sim_tlog_path : record the simulator's API link as a tlog.
+    drop : extra packet filter (fault injection); ``loss_probability`` drops packets at
+        random in both directions.
+    stop_after_goal_s : end the run this long after the truth says the goal was reached.
+    inject : ``inject(t_s) -> [packet, ...]`` extra packets delivered to the companion.
+    **planner_overrides : replace ``[planner]`` keys (e.g. ``formulation``, ``c_max``).
+    """
+    scenario = load_scenario(scenario_path, **planner_overrides)
+    sim = LockstepSimulator.from_file(scenario_path, seed=seed, tlog=sim_tlog_path)
+    companion = Companion(scenario, offboard=offboard)
+    link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path)
+    rng = np.random.default_rng([seed, 0xC0FFEE])
+    dt = 1.0 / scenario.loop.setpoint_rate_hz
+    limit = scenario.duration_s if duration_s is None else float(duration_s)
+    dropped = 0
+    goal_t: float | None = None
+
+    def lost(t_s: float, direction: str, packet: bytes) -> bool:
+        if loss_probability > 0.0 and rng.random() < loss_probability:
+            return True
+        return drop is not None and drop(t_s, direction, packet)
+
+    try:
+        n_ticks = int(math.ceil(limit / dt - 1e-9))
+        for _ in range(n_ticks):
+            for t_pkt, packet in sim.advance(dt):
+                if lost(t_pkt, "to_companion", packet):
+                    dropped += 1
+                    continue
+                link.deliver(t_pkt, packet)
+            if inject is not None:
+                for packet in inject(sim.time_s):
+                    link.deliver(sim.time_s, packet)
+            for rx in link.poll():
+                companion.handle(rx)
+            for msg in companion.tick(sim.time_s):
+                link.send(msg)
+            for packet in link.take_outbound():
+                if lost(sim.time_s, "to_vehicle", packet):
+                    dropped += 1
+                    continue
+                sim.write(packet)
+            if stop_after_goal_s is not None:
+                if goal_t is None and sim.summary().get("goal_reached"):
+                    goal_t = sim.time_s
+                if goal_t is not None and sim.time_s - goal_t >= stop_after_goal_s:
+                    break
+        truth = sim.summary()
+        return RunResult(
+            scenario=scenario.name,
+            seed=seed,
+            formulation=scenario.planner.formulation,
+            truth=truth,
+            companion=companion,
+            sim_time_s=sim.time_s,
+            dropped_packets=dropped,
+            tlog_path=Path(tlog_path) if tlog_path else None,
+        )
+    finally:
+        link.close()
+        sim.close()
