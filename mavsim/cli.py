@@ -1,0 +1,112 @@
+"""``mavsim`` command line: run the simulator over UDP like PX4 SITL.
+
+Examples::
+
+    mavsim --scenario configs/antipodal.toml            # real time, ports as PX4 SITL
+    mavsim --scenario configs/antipodal.toml --speed 5 --duration 30 --json --tlog out.tlog
+    mavsim --lockstep --duration 60 --json              # no sockets: as fast as possible, no client
+
+Exit status: 0 on success, 2 on a bad scenario file or bad arguments (the message
+names the file, section and key), 1 if the ports cannot be bound.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+
+from mavsim.core import Simulator
+from mavsim.errors import ScenarioError, SimulationError
+from mavsim.lockstep import LockstepSimulator
+from mavsim.scenario import default_scenario, load_scenario
+from mavsim.udp import LinkAddress, UdpServer
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["main", "build_parser"]
+
+
+def _port(text: str) -> int:
+    v = int(text)
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"port must be in 0..65535, got {v}")
+    return v
+
+
+def _positive(text: str) -> float:
+    v = float(text)
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="mavsim", description="PX4-like MAVLink kinematic simulator with scripted obstacles")
+    p.add_argument("--scenario", help="scenario file (configs/*.toml); default: no obstacles, on the ground")
+    p.add_argument("--speed", type=_positive, default=1.0, help="simulated seconds per wall second (default 1)")
+    p.add_argument("--duration", type=_positive, help="simulated seconds to run (default: the scenario's duration_s)")
+    p.add_argument("--forever", action="store_true", help="run until interrupted (ignores duration_s)")
+    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    p.add_argument("--tlog", help="record the API link to this tlog file")
+    p.add_argument("--json", action="store_true", help="print the run summary as JSON at the end")
+    p.add_argument("--api-port", type=_port, default=14540, help="offboard client port to send to (default 14540)")
+    p.add_argument("--gcs-port", type=_port, default=14550, help="ground station port to send to (default 14550)")
+    p.add_argument("--api-local-port", type=_port, default=14580, help="local API socket port (default 14580)")
+    p.add_argument("--gcs-local-port", type=_port, default=18570, help="local GCS socket port (default 18570)")
+    p.add_argument("--no-gcs", action="store_true", help="serve the API link only")
+    p.add_argument("--bind", default="127.0.0.1", help="address to bind (default 127.0.0.1, loopback)")
+    p.add_argument("--target-host", default="127.0.0.1", help="host to send to (default 127.0.0.1)")
+    p.add_argument("--lockstep", action="store_true", help="no sockets: run in lockstep, as fast as possible")
+    p.add_argument("--log-level", default="WARNING", help="logging level (default WARNING)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``mavsim`` console script; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.WARNING),
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:
+        scenario = load_scenario(args.scenario) if args.scenario else default_scenario()
+    except ScenarioError as exc:
+        print(f"mavsim: error: {exc}", file=sys.stderr)
+        return 2
+    duration = None if args.forever else (args.duration or scenario.duration_s)
+    if args.lockstep:
+        if duration is None:
+            print("mavsim: error: --lockstep needs a duration", file=sys.stderr)
+            return 2
+        with LockstepSimulator(scenario, seed=args.seed, tlog=args.tlog) as sim:
+            sim.advance(duration)
+            summary = sim.summary()
+    else:
+        links = [LinkAddress("api", args.api_local_port, args.api_port, args.bind, args.target_host)]
+        if not args.no_gcs:
+            links.append(LinkAddress("gcs", args.gcs_local_port, args.gcs_port, args.bind, args.target_host))
+        sim = Simulator(scenario, seed=args.seed, links=tuple(l.name for l in links))
+        try:
+            server = UdpServer(sim, links, speed=args.speed, tlog=args.tlog)
+        except SimulationError as exc:
+            print(f"mavsim: error: {exc}", file=sys.stderr)
+            return 1
+        ports = server.local_ports
+        print(f"mavsim: scenario {scenario.name!r}, API {args.bind}:{ports['api']} -> "
+              f"{args.target_host}:{args.api_port}"
+              + ("" if args.no_gcs else f", GCS {args.bind}:{ports['gcs']} -> {args.target_host}:{args.gcs_port}")
+              + f", speed {args.speed:g}x", file=sys.stderr, flush=True)
+        with server:
+            try:
+                server.run(duration)
+            except KeyboardInterrupt:
+                print("mavsim: interrupted", file=sys.stderr)
+        summary = sim.summary()
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
