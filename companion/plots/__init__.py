@@ -1,0 +1,1 @@
+"""Figures (matplotlib, Agg backend); pure cores never import this package."""
