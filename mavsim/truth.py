@@ -72,10 +72,12 @@ class TruthRecorder:
         """Record the true drone position ``p`` (3,) and obstacle positions (M, 3) at ``t_s``."""
         self.t_s = t_s
         if self._last_p is not None:
-            self.path_length_m += float(np.linalg.norm(p - self._last_p))
-        self._last_p = p.copy()
+            step = p - self._last_p
+            self.path_length_m += math.sqrt(float(step @ step))
+        self._last_p = p
         if len(self.names):
-            d = np.linalg.norm(obstacle_pos - p, axis=1)
+            diff = obstacle_pos - p
+            d = np.sqrt(np.einsum("ij,ij->i", diff, diff))
             closer = d < self.min_dist
             self.min_dist = np.where(closer, d, self.min_dist)
             self.min_dist_t = np.where(closer, t_s, self.min_dist_t)
@@ -89,13 +91,16 @@ class TruthRecorder:
             self.wall_min = np.minimum(self.wall_min, clearance)
             self._contacts("wall", [f"wall{i}" for i in range(len(clearance))], clearance, clearance < 0, t_s)
         if self.sc.goal_ned_m is not None:
-            g = float(np.linalg.norm(p - self.sc.goal_ned_m))
+            e = p - self.sc.goal_ned_m
+            g = math.sqrt(float(e @ e))
             self.min_goal_dist = min(self.min_goal_dist, g)
             if self.goal_reached_t_s is None and g <= self.sc.goal_tolerance_m:
                 self.goal_reached_t_s = t_s
                 logger.info("t=%.2f goal reached", t_s)
 
     def _contacts(self, kind: str, names: list[str], dist: np.ndarray, hit: np.ndarray, t_s: float) -> None:
+        if not self._open and not hit.any():
+            return
         for i in np.flatnonzero(hit):
             key = (kind, names[i])
             c = self._open.get(key)
