@@ -241,12 +241,15 @@ class Companion:
             out.append(self._say(t_s, SEV_NOTICE, "companion: estimate back, resuming"))
         if self._route_start is None:
             self._route_start = est.position.copy()
-        due = self._plan is None or self._last_replan_t is None or t_s - self._last_replan_t >= self.cfg.replan_period_s - 1e-9
+        # Replan every replan_period, also while braking for lack of a plan (no 20 Hz retry storm).
+        due = self._last_replan_t is None or t_s - self._last_replan_t >= self.cfg.replan_period_s - 1e-9
         if due:
             self._replan(t_s, t_v, out)
         if self._plan is None:
             self.state.mode = "braking"
             return self._brake()
+        if self.state.mode == "braking":
+            out.append(self._say(t_s, SEV_NOTICE, "companion: valid plan again, resuming"))
         k = int(math.floor((t_v - self._plan_t0_v) / self.cfg.step_s + 1e-9))
         if k >= self.cfg.horizon_steps:
             self.state.mode = "braking"
@@ -326,7 +329,9 @@ class Companion:
             out.append(messages.named_value_float(int(round(t_s * 1000)), "ct_min", min(realised.values())))
         if plan.status == "failed":
             self.state.failed_plans += 1
-            out.append(self._say(t_s, SEV_WARNING, "companion: no valid plan, braking"))
+            if self._plan is not None or self.state.mode != "braking":
+                self.state.braking_events += 1
+                out.append(self._say(t_s, SEV_WARNING, "companion: no valid plan, braking"))
             self._plan = None
         else:
             if plan.status == "slack":

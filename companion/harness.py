@@ -21,6 +21,7 @@ import numpy as np
 from companion.app import Companion
 from companion.link import MemoryLink
 from companion.offboard import OffboardConfig
+from companion.report import run_report
 from companion.scenario import load_scenario
 from mavsim.lockstep import LockstepSimulator
 
@@ -45,38 +46,8 @@ class RunResult:
     extra: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
-        """The numbers ``companion demo`` prints (JSON-serialisable)."""
-        comp = self.companion
-        records = comp.records
-        solve = np.array([r.solve_time_s for r in records]) if records else np.zeros(0)
-        realised = [min(r.realised_contour.values()) for r in records if r.realised_contour]
-        planned = [r.planned_min_contour for r in records if np.isfinite(r.planned_min_contour)]
-        min_dist = self.truth.get("min_distance_m", {})
-        return {
-            "scenario": self.scenario,
-            "seed": self.seed,
-            "formulation": self.formulation,
-            "c_min": comp.cfg.c_min,
-            "c_max": comp.cfg.c_max,
-            "collided": bool(self.truth.get("collided")),
-            "collisions": len(self.truth.get("collisions", [])),
-            "goal_reached": bool(self.truth.get("goal_reached")),
-            "time_to_goal_s": self.truth.get("time_to_goal_s"),
-            "min_true_distance_m": min(min_dist.values()) if min_dist else None,
-            "min_true_clearance_m": min(self.truth.get("min_clearance_m", {}).values(), default=None),
-            "min_realised_contour": min(realised) if realised else None,
-            "min_planned_contour": min(planned) if planned else None,
-            "replans": len(records),
-            "solve_time_median_ms": float(np.median(solve) * 1e3) if solve.size else None,
-            "solve_time_p99_ms": float(np.percentile(solve, 99) * 1e3) if solve.size else None,
-            "replans_with_slack": comp.state.slack_plans,
-            "failed_plans": comp.state.failed_plans,
-            "stale_events": comp.state.stale_events,
-            "failsafe_events": [t for t in comp.state.events if "brak" in t[1] or "stale" in t[1] or "took over" in t[1] or "HEARTBEAT" in t[1]],
-            "final_mode": self.truth.get("final_mode"),
-            "sim_time_s": self.sim_time_s,
-            "dropped_packets": self.dropped_packets,
-        }
+        """The numbers ``companion demo`` prints (JSON-serialisable): truth plus the companion's view."""
+        return {"seed": self.seed, "dropped_packets": self.dropped_packets, **run_report(self.companion, self.truth)}
 
 
 def run_lockstep(

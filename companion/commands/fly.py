@@ -1,0 +1,78 @@
+"""``companion fly``: fly a scenario's mission against a live autopilot (PX4 SITL, mavsim, a vehicle)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+
+from companion.app import Companion
+from companion.link import DEFAULT_URL, open_link
+from companion.offboard import OffboardConfig
+from companion.realtime import run_realtime
+from companion.report import companion_report, format_report
+from companion.scenario import load_scenario
+
+logger = logging.getLogger(__name__)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "fly",
+        help="fly a scenario's mission over MAVLink in real time",
+        description=(
+            "Connect to a PX4 autopilot, stream velocity setpoints, request OFFBOARD (confirmed from the "
+            "HEARTBEAT) and fly the scenario's mission around the obstacles heard on the link. Without "
+            "--arm the companion waits for the pilot to arm and hands over only when asked to by the "
+            "OFFBOARD request it makes after streaming."
+        ),
+    )
+    p.add_argument("--connect", default=DEFAULT_URL, help=f"pymavlink connection string (default {DEFAULT_URL})")
+    p.add_argument("--scenario", required=True, help="scenario TOML (mission, planner, estimator, map)")
+    p.add_argument("--arm", action="store_true", help="arm the vehicle if it is disarmed")
+    p.add_argument("--takeoff-alt", type=float, default=None, metavar="M", help="take off to M metres above home first")
+    p.add_argument("--reengage", action="store_true", help="re-request OFFBOARD after the pilot took over (default: never)")
+    p.add_argument("--formulation", default=None, help="planner formulation (overrides the scenario)")
+    p.add_argument("--tlog", default=None, help="record the link to this tlog")
+    p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S wall seconds")
+    p.add_argument("--exit-after-goal", type=float, default=None, metavar="S", help="stop S seconds after the goal is reached")
+    p.add_argument("--json", action="store_true", help="print the run report as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    overrides = {"formulation": args.formulation} if args.formulation else {}
+    scenario = load_scenario(args.scenario, **overrides)
+    lp = scenario.loop
+    offboard = OffboardConfig(
+        prestream_s=lp.prestream_s,
+        retry_period_s=lp.retry_period_s,
+        max_retries=lp.max_retries,
+        reengage=args.reengage or lp.reengage,
+        arm=args.arm,
+        takeoff_alt_m=args.takeoff_alt,
+    )
+    companion = Companion(scenario, offboard=offboard)
+
+    def stop(c: Companion) -> bool:
+        t_goal = c.state.goal_reached_t_s
+        if args.exit_after_goal is not None and t_goal is not None and c.records:
+            return c.records[-1].t_link_s - t_goal >= args.exit_after_goal
+        return c.sequencer.phase.name == "GAVE_UP"
+
+    link = open_link(args.connect, tlog=args.tlog)
+    try:
+        stats = run_realtime(companion, link, duration_s=args.duration, stop=stop)
+    except KeyboardInterrupt:
+        stats = None
+    finally:
+        link.close()
+    report = companion_report(companion)
+    if stats is not None:
+        report["ticks"], report["late_ticks"] = stats.ticks, stats.late_ticks
+    if args.json:
+        print(json.dumps(report, indent=2, default=str))
+    else:
+        print(format_report(report), file=sys.stdout)
+    return 0 if companion.sequencer.phase.name != "GAVE_UP" else 1
