@@ -319,3 +319,33 @@ def test_that_output_is_one_packet_per_element_in_time_order():
     dec = mavlink2.MAVLink(None)
     assert all(len(dec.parse_buffer(data) or []) == 1 for _, data in out)
     assert [t for t, _ in out] == sorted(t for t, _ in out) and out[-1][0] <= sim.time_s == 1.0
+
+
+@pytest.mark.parametrize("data, where", [
+    ({"sim": {"tau": 0.3}}, r"\[sim\] unknown key 'tau'"),
+    ({"world": {"obstacle": []}}, r"\[world\] unknown key 'obstacle'"),
+    ({"world": {"obstacles": [{"start_ned_m": [0, 0, -5], "velocity_ned_mps": [1, 0, 0], "speed": 1}]}},
+     r"\[world.obstacles\[0\]\] unknown key 'speed'"),
+    ({"world": {"obstacles": [{"start_ned_m": [0, 0, -5]}]}}, r"velocity_ned_mps"),
+    ({"sim": {"position_noise_cov_m2": [[1, 2, 0], [2, 1, 0], [0, 0, 1]]}}, r"positive semi-definite"),
+    ({"sim": {"params": {"COM_OF_LOSS_T": -1.0}}}, r"params.COM_OF_LOSS_T"),
+])
+def test_that_bad_scenarios_are_rejected_naming_section_and_key(data, where):
+    from mavsim.errors import ScenarioError
+    from mavsim.scenario import scenario_from_dict
+
+    with pytest.raises(ScenarioError, match=where):
+        scenario_from_dict(data, "x.toml")
+
+
+def test_that_an_airborne_disarmed_spawn_is_held_until_armed_with_a_stream():
+    c = Client({**AIRBORNE, "sim": {"start_armed": False}})
+    hb = c.heartbeat(c.run(2.0))
+    assert hb.base_mode & 128 == 0 and c.sim.truth.drone_position_ned_m[2] == pytest.approx(-5.0)
+    assert c.mode(c.set_mode_offboard()) == "OFFBOARD"  # disarmed: selectable without a stream
+    assert acks(c.command(400, 1), 400)[0].result == 1
+    c.run(0.5, vel_sp(1.0))
+    c.send(mavlink2.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
+    msgs = c.run(2.0, vel_sp(1.0))
+    assert acks(msgs, 400)[0].result == 0 and c.sim.truth.drone_velocity_ned_mps[0] > 0.9
+    assert c.sim.truth.drone_position_ned_m[2] == pytest.approx(-5.0, abs=0.01)
