@@ -89,6 +89,8 @@ def run_lockstep(
     limit = scenario.duration_s if duration_s is None else float(duration_s)
     dropped = 0
     goal_t: float | None = None
+    # True state at each replan (campaign: per-step collision truth beside the estimates).
+    replan_truth: list[tuple[float, np.ndarray, dict]] = []
 
     def lost(t_s: float, direction: str, packet: bytes) -> bool:
         if loss_probability > 0.0 and rng.random() < loss_probability:
@@ -108,8 +110,12 @@ def run_lockstep(
                     link.deliver(sim.time_s, packet)
             for rx in link.poll():
                 companion.handle(rx)
+            n_records = len(companion.records)
             for msg in companion.tick(sim.time_s):
                 link.send(msg)
+            if len(companion.records) > n_records:
+                tr = sim.truth
+                replan_truth.append((tr.t_s, tr.drone_position_ned_m, tr.obstacle_positions_ned_m))
             for packet in link.take_outbound():
                 if lost(sim.time_s, "to_vehicle", packet):
                     dropped += 1
@@ -129,6 +135,7 @@ def run_lockstep(
             companion=companion,
             sim_time_s=sim.time_s,
             dropped_packets=dropped,
+            extra={"replan_truth": replan_truth},
             tlog_path=Path(tlog_path) if tlog_path else None,
         )
     finally:
