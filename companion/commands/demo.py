@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import socket
 import subprocess
 import sys
@@ -121,7 +122,7 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
     try:
         fly = subprocess.run(fly_cmd, capture_output=True, text=True, timeout=300)
     finally:
-        sim.terminate()
+        sim.send_signal(signal.SIGINT)  # mavsim prints its ground-truth summary on SIGINT
         try:
             sim_out, _ = sim.communicate(timeout=10)
         except subprocess.TimeoutExpired:
