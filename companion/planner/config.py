@@ -121,6 +121,11 @@ class PlannerConfig:
     slack_penalty : float
         L1 penalty on every safety slack (obstacle rows in their own units, walls in
         metres); large so slack is used only when the constraints cannot all hold.
+    c_max_penalty : float
+        L1 penalty on the ``c_max`` slack (metres for ``hyperplane``). ``c_max`` is a
+        performance bound, not a safety one, so it is priced well below ``slack_penalty``:
+        an unreachable ``c_max`` then bends the plan towards the obstacle without fighting
+        the safety rows (with the safety penalty the SCP oscillated, measured).
     scp_tolerance : float
         Convergence when the cost changes by less than ``scp_tolerance * max(1, |J|)``
         between SCP iterations (and the step is small).
@@ -155,6 +160,7 @@ class PlannerConfig:
     weight_jerk: float = 0.05
     weight_velocity: float = 0.1
     slack_penalty: float = 1e3
+    c_max_penalty: float = 100.0
     scp_tolerance: float = 1e-3
     scp_max_iterations: int = 15
     trust_region_mps: float = 1.0
@@ -183,6 +189,7 @@ class PlannerConfig:
         set_("weight_jerk", _nonnegative("weight_jerk", self.weight_jerk))
         set_("weight_velocity", _nonnegative("weight_velocity", self.weight_velocity))
         set_("slack_penalty", _positive("slack_penalty", self.slack_penalty))
+        set_("c_max_penalty", _positive("c_max_penalty", self.c_max_penalty))
         set_("scp_tolerance", _positive("scp_tolerance", self.scp_tolerance))
         set_("scp_max_iterations", _int_at_least("scp_max_iterations", self.scp_max_iterations, 1))
         set_("trust_region_mps", _positive("trust_region_mps", self.trust_region_mps))

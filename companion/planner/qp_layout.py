@@ -17,7 +17,8 @@ Constraint rows ``l <= A x <= u``::
     dyn    (N, 3)   p_i - p_{i-1} - tau V_i = 0           (p_0 = current position -> l = u)
     vbox   (N, 3)   V_i in [-v_max, v_max] ∩ trust region around the iterate
     accel  (N, 3)   V_i - V_{i-1} in [-a_max tau, a_max tau]   (V_0 = current velocity)
-    obs    (P, N)   c . p_i (+ c_lam lam) + s_lo - s_hi in [l, u]  (formulation-specific)
+    obs    (P, N)   c . p_i (+ c_lam lam) + s_lo >= l      (formulation-specific)
+    obs_hi (P, N)   c . p_i (+ c_lam lam) - s_hi <= u      (the c_max side; only with c_max)
     adm    (P, N)   g_p . p_i + g_lam lam + e_pos - e_neg = rhs    (``paper`` only)
     lambox (P, N)   lam in [eps, 1 - eps] ∩ trust region           (``paper`` only)
     wall   (W, N)   a_w . p_i - s_wall <= b_w - r_min sqrt(a' S_i a) - R_drone
@@ -108,7 +109,8 @@ class QpLayout:
         slack_names = ("s_lo", "s_hi", "e_pos", "e_neg", "s_wall")
         self.slack_cols = np.concatenate([np.arange(self.col[s].start, self.col[s].start + self.col[s].size) for s in slack_names])
         # ---- rows
-        rsizes = [("dyn", 3 * N), ("vbox", 3 * N), ("accel", 3 * N), ("obs", PN), ("adm", PN if paper else 0),
+        rsizes = [("dyn", 3 * N), ("vbox", 3 * N), ("accel", 3 * N), ("obs", PN), ("obs_hi", PN if upper else 0),
+                  ("adm", PN if paper else 0),
                   ("lambox", PN if paper else 0), ("wall", W * N), ("slack", self.slack_cols.size)]
         self.row: dict[str, Block] = {}
         start = 0
@@ -149,17 +151,24 @@ class QpLayout:
         r0 = self.row["accel"].start
         add(None, r0 + e3, V + e3, 1.0)
         add(None, r0 + later, V + later - 3, -1.0)
-        # obs: c . p_i (+ c_lam lam) + s_lo - s_hi
+        # obs: c . p_i (+ c_lam lam) + s_lo >= l ; obs_hi: c . p_i (+ c_lam lam) - s_hi <= u. Two rows,
+        # not one row with both slacks: the columns +s_lo and -s_hi of one row are collinear
+        # and OSQP left both positive together (measured)
         jn = np.arange(P * N)                          # flat (j, i)
         step = jn % N
+        p_cols = p + (3 * step[:, None] + np.arange(3)).ravel()
         r0 = self.row["obs"].start
-        add("obs_p", np.repeat(r0 + jn, 3), p + (3 * step[:, None] + np.arange(3)).ravel(), 0.0)
+        add("obs_p", np.repeat(r0 + jn, 3), p_cols, 0.0)
         add(None, r0 + jn, self.col["s_lo"].start + jn, slack_scale)
         if self.upper:
-            add(None, r0 + jn, self.col["s_hi"].start + jn, -slack_scale)
+            rh = self.row["obs_hi"].start
+            add("obs_hi_p", np.repeat(rh + jn, 3), p_cols, 0.0)
+            add(None, rh + jn, self.col["s_hi"].start + jn, -slack_scale)
         if self.paper:
             lam = self.col["lam"].start
             add("obs_lam", r0 + jn, lam + jn, 0.0)
+            if self.upper:
+                add("obs_hi_lam", rh + jn, lam + jn, 0.0)
             r1 = self.row["adm"].start
             add("adm_p", np.repeat(r1 + jn, 3), p + (3 * step[:, None] + np.arange(3)).ravel(), 0.0)
             add("adm_lam", r1 + jn, lam + jn, 0.0)

@@ -11,7 +11,7 @@ Cost (``0.5 x'Px + q'x + const``)::
     w_t (p_N - g)' S_N^-1 (p_N - g)                          terminal Mahalanobis distance
   + w_j sum_{i=1}^{N-1} |(V_{i+1} - 2 V_i + V_{i-1}) / tau^2|^2   jerk, V_0 = current velocity
   + w_v sum_i |V_i|^2                                         small effort term
-  + rho (sum s_lo + s_hi + e_pos + e_neg + s_wall)            L1 penalty on every slack
+  + rho (sum s_lo + e_pos + e_neg + s_wall) + rho_c sum s_hi  L1 penalties on the slacks
 
 Positions obey the paper's holonomic model ``p_i = p_{i-1} + tau V_i``.
 
@@ -120,8 +120,9 @@ class _RequestData:
         q[layout.col["V"].slice] = (jerk_scale * (layout.d2.T @ c)).ravel()
         pn = layout.col["p"].start + 3 * (N - 1)
         q[pn:pn + 3] = -2.0 * wt * (m @ request.target)
-        for name in ("s_lo", "s_hi", "e_pos", "e_neg", "s_wall"):
+        for name in ("s_lo", "e_pos", "e_neg", "s_wall"):
             q[layout.col[name].slice] = cfg.slack_penalty * layout.slack_scale   # variable = slack / slack_scale
+        q[layout.col["s_hi"].slice] = cfg.c_max_penalty * layout.slack_scale
         self.q = q
         self.constant = wt * request.target @ m @ request.target + wj / tau**4 * float(np.sum(c * c))
         # A: constants plus wall normals (fixed for this request)
@@ -319,7 +320,10 @@ class Planner:
         a_slot = data.a_slot
         a_slot[layout.slot["obs_p"].slice] = rows.coef_p.ravel()
         l, u = data.l, data.u
-        l[layout.row["obs"].slice], u[layout.row["obs"].slice] = rows.lower.ravel(), rows.upper.ravel()
+        l[layout.row["obs"].slice], u[layout.row["obs"].slice] = rows.lower.ravel(), np.inf
+        if layout.upper:
+            a_slot[layout.slot["obs_hi_p"].slice] = rows.coef_p.ravel()
+            l[layout.row["obs_hi"].slice], u[layout.row["obs_hi"].slice] = -np.inf, rows.upper.ravel()
         # velocity box ∩ trust region around the iterate
         vmax, tr = cfg.velocity_max, cfg.trust_region_mps
         v_lo, v_hi = np.maximum(-vmax, v_bar - tr), np.minimum(vmax, v_bar + tr)
@@ -327,6 +331,8 @@ class Planner:
         lam_lo = lam_hi = np.zeros((P, 0))
         if layout.paper:
             a_slot[layout.slot["obs_lam"].slice] = rows.coef_lam.ravel()
+            if layout.upper:
+                a_slot[layout.slot["obs_hi_lam"].slice] = rows.coef_lam.ravel()
             a_slot[layout.slot["adm_p"].slice] = rows.adm_p.ravel()
             a_slot[layout.slot["adm_lam"].slice] = rows.adm_lam.ravel()
             l[layout.row["adm"].slice] = u[layout.row["adm"].slice] = rows.adm_rhs.ravel()
