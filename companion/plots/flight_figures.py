@@ -1,0 +1,318 @@
+"""Figures of one flight from the companion's replan records (demo and replay).
+
+:func:`write_flight_figures` draws four PNGs from ``companion.records``
+(:class:`companion.app.ReplanRecord`) and the companion's configuration:
+
+- ``topview.png``: paths of the drone and of every tracked obstacle seen from above,
+  with confidence ellipses at a few instants, walls and static obstacles;
+- ``contour.png``: contour of touch with each obstacle over time, with ``c_min`` and
+  ``c_max``;
+- ``speed_accel.png``: commanded velocity per axis and its norm, and the acceleration
+  between successive replans, against the planner's bounds;
+- ``solve_time.png``: planner solve time per replan, marked by plan status.
+
+Everything is in the local NED frame (x north, y east, z down; metres, seconds). Only
+this package imports matplotlib (Agg backend, no display).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Circle, Ellipse  # noqa: E402
+
+from companion.overlap import touch_radius  # noqa: E402
+
+logger = logging.getLogger(__name__)
+
+_DPI = 110
+_STATUS_STYLE = {"optimal": ("tab:green", "o"), "slack": ("tab:orange", "s"), "failed": ("tab:red", "x")}
+
+
+def _track_label(key) -> str:
+    if isinstance(key, tuple) and len(key) == 2:
+        return f"obstacle sys {key[0]}"
+    return f"obstacle {key}"
+
+
+def slice_ellipse(cov: np.ndarray, confidence: float) -> tuple[float, float, float]:
+    """Horizontal slice through the centre of a 3-D Gaussian's confidence ellipsoid.
+
+    The ellipsoid ``d' S^-1 d <= r^2`` with ``r = touch_radius(confidence, 3)`` (the
+    contour the planner keeps apart) cut by the horizontal plane through its centre is
+    the ellipse ``[dx dy] A [dx dy]' <= r^2`` with ``A`` the north-east block of ``S^-1``.
+    (This is the planar slice, not the shadow of the 2-D marginal, which uses the block of
+    ``S`` itself and is larger when north/east correlate with down.)
+
+    Parameters
+    ----------
+    cov : (3, 3) position covariance, NED, m^2.
+    confidence : the contour, e.g. ``c_min``.
+
+    Returns
+    -------
+    width_east, height_north, angle_deg : full axis lengths (m) along east and north
+        before rotation, and the rotation (degrees counter-clockwise from east) for a
+        plot with east on the horizontal axis and north on the vertical.
+    """
+    r = float(touch_radius(confidence, 3))
+    a_ne = np.linalg.inv(np.asarray(cov, dtype=float))[:2, :2]
+    # Plot coordinates (east, north) = (y, x): swap the NED block.
+    a_plot = a_ne[::-1, ::-1]
+    evals, evecs = np.linalg.eigh(a_plot)
+    semi = r / np.sqrt(np.maximum(evals, 1e-300))
+    angle = math.degrees(math.atan2(evecs[1, 0], evecs[0, 0]))
+    return 2.0 * semi[0], 2.0 * semi[1], angle
+
+
+def write_flight_figures(companion, out_dir: str | Path, truth: dict | None = None, *, prefix: str = "") -> list[Path]:
+    """Draw the flight figures of a companion run (demo, replay) as PNGs in ``out_dir``.
+
+    Parameters
+    ----------
+    companion : :class:`companion.app.Companion`
+        After the run: ``records`` (one per replan), ``cfg`` (planner config: ``c_min``,
+        ``c_max``, ``velocity_max``, ``accel_max``) and ``scenario`` (walls, static
+        obstacles, goal). A run with no replans or no obstacles gives figures that say so.
+    out_dir : str or Path
+        Folder (created if missing).
+    truth : dict, optional
+        The simulator's summary (``mavsim`` truth); its smallest true distances and
+        collision flag go into the top view's title.
+    prefix : str
+        Prepended to each file name (``antipodal_`` gives ``antipodal_topview.png``).
+
+    Returns
+    -------
+    list of Path
+        ``topview``, ``contour``, ``speed_accel`` and ``solve_time`` PNGs, in that order.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    records = list(getattr(companion, "records", []) or [])
+    drawers = (("topview", _topview), ("contour", _contour), ("speed_accel", _speed_accel), ("solve_time", _solve_time))
+    paths = []
+    for name, draw in drawers:
+        path = out / f"{prefix}{name}.png"
+        fig = draw(companion, records, truth)
+        try:
+            fig.savefig(path, dpi=_DPI)
+        finally:
+            plt.close(fig)
+        paths.append(path)
+    logger.info("wrote %d flight figures to %s", len(paths), out)
+    return paths
+
+
+def _no_data(ax, text: str) -> None:
+    ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.4")
+
+
+def _tracks(records) -> list:
+    keys: list = []
+    for r in records:
+        for k in r.obstacle_positions:
+            if k not in keys:
+                keys.append(k)
+    return keys
+
+
+def _instants(records, n: int = 4) -> list[int]:
+    """A few replans to draw ellipses at: evenly spaced, plus the closest approach."""
+    if not records:
+        return []
+    idx = set(np.linspace(0, len(records) - 1, min(n, len(records))).round().astype(int).tolist())
+    contours = [min(r.realised_contour.values()) if r.realised_contour else math.inf for r in records]
+    if any(math.isfinite(c) for c in contours):
+        idx.add(int(np.argmin(contours)))
+    return sorted(idx)
+
+
+def _topview(companion, records, truth):
+    cfg = companion.cfg
+    scenario = companion.scenario
+    fig, ax = plt.subplots(figsize=(7.0, 6.4))
+    ax.set_xlabel("east y [m]")
+    ax.set_ylabel("north x [m]")
+    ax.set_aspect("equal", adjustable="box")
+    ax.grid(True, alpha=0.3)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    pts = []
+    if records:
+        p = np.array([r.drone_position for r in records])
+        pts.append(p)
+        ax.plot(p[:, 1], p[:, 0], "-", color="k", lw=1.8, label="drone (estimate)")
+        ax.plot(p[0, 1], p[0, 0], "o", color="k", ms=5)
+    for i, key in enumerate(_tracks(records)):
+        q = np.array([r.obstacle_positions[key] for r in records if key in r.obstacle_positions])
+        pts.append(q)
+        c = colors[(i + 1) % len(colors)]
+        ax.plot(q[:, 1], q[:, 0], "-", color=c, lw=1.3, label=_track_label(key))
+        ax.plot(q[0, 1], q[0, 0], "o", color=c, ms=4)
+    goal = np.asarray(scenario.mission.goal, dtype=float)
+    pts.append(goal[None, :])
+    ax.plot(goal[1], goal[0], "*", color="gold", mec="k", ms=14, label="goal")
+    for s in getattr(scenario, "static_obstacles", ()):
+        c = np.asarray(s.center, dtype=float)
+        pts.append(c[None, :])
+        ax.add_patch(Circle((c[1], c[0]), s.radius, color="0.4", alpha=0.5))
+        w, h, ang = slice_ellipse(s.covariance, cfg.c_min)
+        ax.add_patch(Ellipse((c[1], c[0]), w, h, angle=ang, fill=False, ec="0.2", lw=0.8, ls="--"))
+    r_drone = float(getattr(cfg, "drone_radius_m", 0.0))
+    r_obs = float(getattr(getattr(companion, "loop", None), "obstacle_radius_m", 0.0))
+    for j in _instants(records):
+        rec = records[j]
+        for k, (pos, cov, radius, c) in enumerate(
+            [(rec.drone_position, rec.drone_cov, r_drone, "k")]
+            + [(rec.obstacle_positions[key], rec.obstacle_covs[key], r_obs, colors[(i + 1) % len(colors)])
+               for i, key in enumerate(_tracks(records)) if key in rec.obstacle_positions]
+        ):
+            w, h, ang = slice_ellipse(cov, cfg.c_min)
+            ax.add_patch(Ellipse((pos[1], pos[0]), w, h, angle=ang, fill=True, fc=c, alpha=0.25, ec=c, lw=0.8))
+            ax.add_patch(Circle((pos[1], pos[0]), radius, fill=False, ec=c, lw=0.6, ls=":"))
+        pos = rec.drone_position
+        ax.annotate(f"t={rec.t_link_s:.1f}s", (pos[1], pos[0]), xytext=(4, 4), textcoords="offset points", fontsize=7)
+    allp = np.vstack(pts) if pts else np.zeros((1, 3))
+    lo, hi = allp[:, :2].min(axis=0) - 2.0, allp[:, :2].max(axis=0) + 2.0
+    _walls(ax, scenario, lo, hi)
+    ax.set_xlim(lo[1], hi[1])
+    ax.set_ylim(lo[0], hi[0])
+    title = f"top view (north up, east right); ellipses: c_min = {cfg.c_min:g} slice, dotted: body radii"
+    if truth:
+        dist = truth.get("min_distance_m") or {}
+        extra = []
+        if dist:
+            extra.append(f"smallest true distance {min(dist.values()):.2f} m")
+        if "collided" in truth:
+            extra.append("COLLISION" if truth.get("collided") else "no collision")
+        if extra:
+            title += "\n" + ", ".join(extra)
+    if not records:
+        _no_data(ax, "no replans recorded")
+    ax.set_title(title, fontsize=9)
+    ax.legend(loc="best", fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def _walls(ax, scenario, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Each wall ``n . p <= b`` as its boundary line in the horizontal plane, the blocked side hatched."""
+    for wall in getattr(scenario, "walls", ()):
+        n = np.asarray(wall.normal, dtype=float)
+        nx, ny, b = n[0], n[1], float(wall.offset)
+        if math.hypot(nx, ny) < 1e-9:
+            continue  # floor or ceiling: not visible from above
+        if abs(ny) >= abs(nx):
+            xs = np.array([lo[0], hi[0]])
+            ys = (b - nx * xs) / ny
+        else:
+            ys = np.array([lo[1], hi[1]])
+            xs = (b - ny * ys) / nx
+        ax.plot(ys, xs, "-", color="saddlebrown", lw=2.0)
+        # blocked side: shift the line along +normal
+        d = 0.6 / math.hypot(nx, ny)
+        ax.fill([ys[0], ys[1], ys[1] + ny * d, ys[0] + ny * d], [xs[0], xs[1], xs[1] + nx * d, xs[0] + nx * d],
+                color="saddlebrown", alpha=0.25, hatch="//", lw=0)
+
+
+def _contour(companion, records, truth):
+    cfg = companion.cfg
+    fig, ax = plt.subplots(figsize=(7.0, 4.2))
+    keys = _tracks(records)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, key in enumerate(keys):
+        pts = [(r.t_link_s, r.realised_contour[key]) for r in records if key in r.realised_contour]
+        if pts:
+            t, c = np.array(pts).T
+            ax.plot(t, c, "-", color=colors[(i + 1) % len(colors)], lw=1.4, label=_track_label(key))
+    planned = np.array([(r.t_link_s, r.planned_min_contour) for r in records if math.isfinite(r.planned_min_contour)])
+    if planned.size:
+        ax.plot(planned[:, 0], planned[:, 1], ".", color="k", ms=3, label="planned minimum (in range)")
+    ax.axhline(cfg.c_min, color="tab:red", ls="--", lw=1.2, label=f"c_min = {cfg.c_min:g}")
+    if cfg.c_max is not None:
+        ax.axhline(cfg.c_max, color="tab:purple", ls="--", lw=1.2, label=f"c_max = {cfg.c_max:g}")
+    values = [cfg.c_min] + ([cfg.c_max] if cfg.c_max is not None else [])
+    values += [c for r in records for c in r.realised_contour.values()]
+    values += planned[:, 1].tolist() if planned.size else []
+    ax.set_ylim(max(0.0, min(values) - 0.05), 1.005)  # zoom on the range that matters
+    ax.set_xlabel("link time [s]")
+    ax.set_ylabel("contour of touch (confidence)")
+    ax.set_title("contour of touch: lines, each obstacle now (estimates at each replan);\n"
+                 "dots, smallest over the planned horizon (obstacles in sensing range)", fontsize=9)
+    ax.grid(True, alpha=0.3)
+    if not keys and not planned.size:
+        _no_data(ax, "no obstacles tracked" if records else "no replans recorded")
+    ax.legend(loc="center right", fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def _speed_accel(companion, records, truth):
+    cfg = companion.cfg
+    vmax = np.asarray(cfg.velocity_max, dtype=float)
+    amax = np.asarray(cfg.accel_max, dtype=float)
+    fig, (ax_v, ax_a) = plt.subplots(2, 1, figsize=(7.0, 6.0), sharex=True)
+    axis_colors = ("tab:blue", "tab:orange", "tab:green")
+    names = ("north", "east", "down")
+    if records:
+        t = np.array([r.t_link_s for r in records])
+        v = np.array([r.command for r in records])
+        for k in range(3):
+            ax_v.step(t, v[:, k], where="post", color=axis_colors[k], lw=1.2, label=f"v {names[k]}")
+            ax_v.axhline(vmax[k], color=axis_colors[k], ls=":", lw=0.8)
+            ax_v.axhline(-vmax[k], color=axis_colors[k], ls=":", lw=0.8)
+        ax_v.step(t, np.linalg.norm(v, axis=1), where="post", color="k", lw=1.4, label="|v|")
+        if t.size >= 2:
+            dt = np.diff(t)
+            a = np.diff(v, axis=0) / dt[:, None]
+            for k in range(3):
+                ax_a.plot(t[1:], a[:, k], ".-", color=axis_colors[k], ms=3, lw=0.8, label=f"a {names[k]}")
+                ax_a.axhline(amax[k], color=axis_colors[k], ls="--", lw=0.8)
+                ax_a.axhline(-amax[k], color=axis_colors[k], ls="--", lw=0.8)
+        else:
+            _no_data(ax_a, "fewer than two replans")
+    else:
+        _no_data(ax_v, "no replans recorded")
+        _no_data(ax_a, "no replans recorded")
+    ax_v.set_ylabel("commanded velocity [m/s]")
+    ax_v.set_title("first planned velocity per replan; dotted: velocity bounds per axis", fontsize=9)
+    ax_a.set_ylabel("acceleration [m/s²]")
+    ax_a.set_xlabel("link time [s]")
+    ax_a.set_title("finite difference between replans; dashed: acceleration bounds per axis", fontsize=9)
+    for ax in (ax_v, ax_a):
+        ax.grid(True, alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper right", fontsize=7, ncol=4)
+    fig.tight_layout()
+    return fig
+
+
+def _solve_time(companion, records, truth):
+    cfg = companion.cfg
+    fig, ax = plt.subplots(figsize=(7.0, 3.8))
+    if records:
+        t = np.array([r.t_link_s for r in records])
+        ms = np.array([r.solve_time_s for r in records]) * 1e3
+        ax.plot(t, ms, "-", color="0.6", lw=0.8)
+        for status, (color, marker) in _STATUS_STYLE.items():
+            sel = np.array([r.status == status for r in records])
+            if sel.any():
+                ax.plot(t[sel], ms[sel], marker, color=color, ms=4, ls="none", label=f"{status} ({int(sel.sum())})")
+        ax.axhline(cfg.replan_period_s * 1e3, color="tab:red", ls="--", lw=1.0, label=f"replan period {cfg.replan_period_s * 1e3:.0f} ms")
+        ax.set_ylim(0.0, max(float(ms.max()), cfg.replan_period_s * 1e3) * 1.1)
+        ax.legend(loc="upper right", fontsize=7)
+    else:
+        _no_data(ax, "no replans recorded")
+    ax.set_xlabel("link time [s]")
+    ax.set_ylabel("solve time [ms]")
+    ax.set_title("planner solve time per replan (wall clock of the run that planned)", fontsize=9)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    return fig
