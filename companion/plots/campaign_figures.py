@@ -1,0 +1,79 @@
+"""Figures of a safety campaign: collision rate by method, smallest contour of touch per episode."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+logger = logging.getLogger(__name__)
+
+
+def plot_campaign(summary: dict, directory: str | Path, *, c_min: float, title: str = "campaign") -> list[Path]:
+    """Draw ``collision_rate.png`` and ``min_contour_ecdf.png`` into ``directory``.
+
+    Parameters
+    ----------
+    summary : dict
+        Per-method summaries (:func:`companion.campaign.summarise`): ``collision_rate``,
+        ``collision_ci95``, ``episodes``, ``min_realised_contour`` (one value per episode,
+        ``None`` when no obstacle came within sensing range).
+    directory : output folder (created).
+    c_min : the contour of touch the constraint protects (drawn as a line).
+    title : figure title prefix.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    methods = list(summary)
+    written = []
+
+    fig, ax = plt.subplots(figsize=(6.0, 3.6))
+    rates = np.array([summary[m]["collision_rate"] or 0.0 for m in methods])
+    ci = np.array([summary[m]["collision_ci95"] for m in methods]).reshape(-1, 2)
+    x = np.arange(len(methods))
+    ax.bar(x, rates, color="tab:blue", alpha=0.7)
+    ax.errorbar(x, rates, yerr=[rates - ci[:, 0], ci[:, 1] - rates], fmt="none", ecolor="k", capsize=5,
+                label="95 % Clopper-Pearson")
+    for xi, m in zip(x, methods):
+        s = summary[m]
+        ax.annotate(f"{s['collisions']}/{s['episodes']}", (xi, ci[xi, 1]), textcoords="offset points", xytext=(0, 4),
+                    ha="center", fontsize=8)
+    ax.set_xticks(x, methods)
+    ax.set_ylabel("episodes with a collision")
+    ax.set_ylim(0.0, max(0.05, float(ci[:, 1].max()) * 1.2))
+    ax.set_title(f"{title}: collision rate by method")
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    path = directory / "collision_rate.png"
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    written.append(path)
+
+    fig, ax = plt.subplots(figsize=(6.0, 3.6))
+    for m in methods:
+        values = np.sort([v for v in summary[m]["min_realised_contour"] if v is not None])
+        if values.size:
+            ax.step(values, np.arange(1, values.size + 1) / values.size, where="post", label=f"{m} ({values.size})")
+    ax.axvline(c_min, color="k", linestyle="--", linewidth=1, label=f"c_min = {c_min:.2f}")
+    ax.set_xlim(0.0, 1.0)
+    ax.set_xlabel("smallest realised contour of touch in the episode")
+    ax.set_ylabel("share of episodes (ECDF)")
+    ax.set_title(f"{title}: smallest contour of touch")
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    path = directory / "min_contour_ecdf.png"
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    written.append(path)
+    logger.info("wrote %s", ", ".join(str(p) for p in written))
+    return written
