@@ -15,8 +15,8 @@ records with no inbound record between them, ended by its SET_POSITION_TARGET_LO
 (the last message of a streaming tick), and its time is the stamp of its first record.
 Ticks that sent nothing (the companion ticks at ``setpoint_rate_hz`` from its first tick
 on, and a tick that is not streaming and not due a HEARTBEAT sends nothing) are put back
-on the setpoint-rate grid between recorded ticks, each after the inbound records stamped
-up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
+on the setpoint-rate grid between recorded ticks and after the last one up to the end of
+the log, each after the inbound records stamped up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
 
 *What-if* (no companion packets: mavsim's own ``--tlog``, a MAVProxy or QGroundControl
 log). The companion ticks at its setpoint rate over the log's duration, and since no
@@ -440,8 +440,9 @@ def _schedule(stream: list[tuple[bool, _Rec]], period_us: int) -> list:
     """Inbound records and ticks in the order the recorded companion saw them.
 
     Recorded ticks sit where their first outbound record is; silent ticks are put on the
-    setpoint grid between recorded ticks (or over the whole log when none was recorded),
-    each after every inbound record stamped up to its time.
+    setpoint grid between recorded ticks and after the last one up to the last record's
+    time (or over the whole log when none was recorded), each after every inbound record
+    stamped up to its time.
     """
     events: list = []
     cur: _Tick | None = None
@@ -468,6 +469,9 @@ def _schedule(stream: list[tuple[bool, _Rec]], period_us: int) -> list:
             silent.append(t)
             t += period_us
         gaps[id(a)] = silent
+    # After the last recorded tick the companion kept ticking silently up to the end of the log.
+    end_us = max(ev.t_us for ev in events)
+    gaps[id(ticks[-1])] = deque(range(ticks[-1].t_us + period_us, end_us + 1, period_us))
     return _merge(events, gaps, period_us)
 
 
@@ -484,6 +488,5 @@ def _merge(events: list, gaps: dict, period_us: int) -> list:
         while pending and ev.t_us > pending[0]:
             out.append(_Tick(pending.popleft(), silent=True))
         out.append(ev)
-    if None in gaps:  # what-if: the last grid points up to the last record
-        out.extend(_Tick(t, silent=True) for t in pending)
+    out.extend(_Tick(t, silent=True) for t in pending)  # grid points after the last record, up to its time
     return out
