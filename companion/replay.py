@@ -355,8 +355,6 @@ def replay(
     if assume_engaged is None:
         assume_engaged = mode == "what-if"
     notes = []
-    if not inbound or not n_in:
-        notes.append("no inbound messages")
     if mode == "compare" and not lockstep:
         notes.append("real-time log: ticks are timed by their first packet's stamp; expect timing-level differences")
 
