@@ -55,6 +55,7 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import beta, norm
 
 from companion.errors import InputError
+from companion.harness import run_lockstep  # imports mavsim (the harness exception of the dependency rule)
 from companion.overlap import touch_radius
 
 logger = logging.getLogger(__name__)
@@ -72,6 +73,11 @@ ANISOTROPIC_SHARE = 0.6
 SENSING_RANGE_M = 10.0
 DEFAULT_DURATION_S = 40.0
 STOP_AFTER_GOAL_S = 0.5
+#: (step, obstacle) pairs whose realised contour of touch is below this are *near*: the
+#: collision constraint is close to active there (far pairs sit at c = 1.0).
+ACTIVE_CONTOUR = 0.99
+#: chi2_3 95 % quantile: a consistent filter's NEES exceeds it in 5 % of steps.
+NEES_95 = 7.814727903251178
 QUIET_STREAMS_HZ = {"ATTITUDE": 5.0, "GLOBAL_POSITION_INT": 5.0, "LOCAL_POSITION_NED": 5.0}
 #: Time (s) the drone needs to take over before it moves (prestream + OFFBOARD), and its
 #: typical cruise speed (m/s) toward a far waypoint; used only to time encounters.
@@ -342,8 +348,6 @@ def run_episode(task: EpisodeTask, *, keep_records: bool = False) -> dict:
     Returns a JSON-serialisable dict (plus ``solve_times_s``, a list, for pooling).
     With ``keep_records`` the :class:`~companion.harness.RunResult` is returned under ``"run"``.
     """
-    from companion.harness import run_lockstep  # the one module that imports mavsim
-
     base = {"episode": task.index, "method": task.method, "family": task.family, "seed": task.seed,
             "sim_seed": episode_sim_seed(task.seed, task.index)}
     t0 = time.perf_counter()
@@ -379,18 +383,34 @@ def score_run(run: Any, data: dict) -> dict:
         raise RuntimeError(f"truth at replans ({len(replan_truth)}) does not match replans ({len(records)})")
     planner = data["planner"]
     period, c_min, sensing = planner["replan_period_s"], planner["c_min"], planner["sensing_range_m"]
+    step = planner.get("step_s", period)
     obstacles = data["world"]["obstacles"]
     names = [o["name"] for o in obstacles]
     radius_sum = data["vehicle"]["radius_m"] + np.array([o["radius_m"] for o in obstacles])
 
+    sysid_base = data["world"].get("obstacle_sysid_base", 101)
     steps = pair_steps = pair_hits = contour_pairs = contour_below = steps_below = 0
+    active_pairs = active_hits = 0
+    bound_sum = 0.0
     min_contour = math.inf
+    drone_nees: list[float] = []
+    rel_nees: list[float] = []
+    model_err: list[float] = []
+    prev = None  # (t, true drone position, planned displacement over the first step)
     last_t = -math.inf
-    for rec, (t_true, p_true, obs_true) in zip(records, replan_truth):
+    for rec, (_, p_true, obs_true) in zip(records, replan_truth):
         if rec.t_link_s < last_t + period - 1e-6:
             continue
+        if prev is not None and abs(rec.t_link_s - prev[0] - step) < 1e-6:
+            # model mismatch: true displacement over one step against the planner's tau * V_1
+            model_err.append(float(np.linalg.norm((p_true - prev[1]) - prev[2])))
+        prev = (rec.t_link_s, p_true, None if rec.status == "failed" else rec.plan_positions[0] - rec.drone_position)
+        if prev[2] is None:
+            prev = None
         last_t = rec.t_link_s
         steps += 1
+        e = rec.drone_position - p_true
+        drone_nees.append(float(e @ np.linalg.solve(rec.drone_cov, e)))   # e' S^-1 e ~ chi2_3 if consistent
         if names:
             d = np.linalg.norm(np.array([obs_true[n] for n in names]) - p_true, axis=1)
             in_range = d <= sensing
@@ -398,13 +418,23 @@ def score_run(run: Any, data: dict) -> dict:
             pair_hits += int((in_range & (d < radius_sum)).sum())
         below_here = False
         for key, ct in rec.realised_contour.items():
-            if np.linalg.norm(rec.obstacle_positions[key] - rec.drone_position) > sensing:
+            rel_est = rec.obstacle_positions[key] - rec.drone_position
+            if np.linalg.norm(rel_est) > sensing:
                 continue
             contour_pairs += 1
             min_contour = min(min_contour, ct)
+            bound_sum += float(norm.cdf(-touch_radius(ct, 3))) if ct < 1.0 else 0.0
             if ct < c_min:
                 contour_below += 1
                 below_here = True
+            j = key[0] - sysid_base
+            if 0 <= j < len(names):
+                rel_true = obs_true[names[j]] - p_true
+                err = rel_est - rel_true
+                rel_nees.append(float(err @ np.linalg.solve(rec.drone_cov + rec.obstacle_covs[key], err)))
+                if ct < ACTIVE_CONTOUR:
+                    active_pairs += 1
+                    active_hits += int(np.linalg.norm(rel_true) < radius_sum[j])
         steps_below += below_here
     statuses = [r.status for r in records]
     commands = np.array([r.command for r in records]).reshape(-1, 3)
@@ -424,6 +454,12 @@ def score_run(run: Any, data: dict) -> dict:
         "contour_pairs_below_c_min": contour_below,
         "steps_below_c_min": steps_below,
         "min_realised_contour": None if not math.isfinite(min_contour) else float(min_contour),
+        "active_pairs": active_pairs,
+        "active_pair_collisions": active_hits,
+        "predicted_collisions_bound": bound_sum,
+        "drone_nees": drone_nees,
+        "relative_nees": rel_nees,
+        "model_step_error_m": model_err,
         "replans": len(records),
         "failed_plans": statuses.count("failed"),
         "slack_plans": statuses.count("slack"),
@@ -475,6 +511,11 @@ def summarise(results: list[dict], methods: tuple[str, ...] | list[str], c_min: 
         contour_pairs = sum(r["contour_pairs"] for r in rows)
         steps = sum(r["steps"] for r in rows)
         solve = np.array([t for r in rows for t in r["solve_times_s"]])
+        d_nees = np.array([x for r in rows for x in r["drone_nees"]])
+        r_nees = np.array([x for r in rows for x in r["relative_nees"]])
+        model_err = np.array([x for r in rows for x in r["model_step_error_m"]])
+        active = sum(r["active_pairs"] for r in rows)
+        active_hits = sum(r["active_pair_collisions"] for r in rows)
         ttg = [r["time_to_goal_s"] for r in rows if r["goal_reached"] and r["time_to_goal_s"] is not None]
         replans = sum(r["replans"] for r in rows)
         out[m] = {
@@ -489,6 +530,18 @@ def summarise(results: list[dict], methods: tuple[str, ...] | list[str], c_min: 
             "pair_step_frequency": pair_hits / pair_steps if pair_steps else None,
             "pair_step_ci95": clopper_pearson(pair_hits, pair_steps),
             "bound_phi_minus_r_min": bound,
+            "active_pairs": active,
+            "active_pair_collisions": active_hits,
+            "active_pair_frequency": active_hits / active if active else None,
+            "active_pair_ci95": clopper_pearson(active_hits, active),
+            "predicted_collisions_bound": sum(r["predicted_collisions_bound"] for r in rows),
+            "drone_nees_mean": float(d_nees.mean()) if d_nees.size else None,
+            "drone_nees_share_above_chi2_95": float((d_nees > NEES_95).mean()) if d_nees.size else None,
+            "relative_nees_mean": float(r_nees.mean()) if r_nees.size else None,
+            "relative_nees_share_above_chi2_95": float((r_nees > NEES_95).mean()) if r_nees.size else None,
+            "model_step_error_median_m": float(np.median(model_err)) if model_err.size else None,
+            "model_step_error_p95_m": float(np.percentile(model_err, 95)) if model_err.size else None,
+            "model_step_error_max_m": float(model_err.max()) if model_err.size else None,
             "contour_pairs": contour_pairs,
             "share_pairs_below_c_min": sum(r["contour_pairs_below_c_min"] for r in rows) / contour_pairs if contour_pairs else None,
             "steps": steps,
@@ -514,6 +567,10 @@ def summarise(results: list[dict], methods: tuple[str, ...] | list[str], c_min: 
 # --------------------------------------------------------------------------- campaign
 
 
+#: Per-step lists in an episode row, pooled into the summary and left out of the JSON rows.
+_POOLED_KEYS = ("solve_times_s", "drone_nees", "relative_nees", "model_step_error_m", "run")
+
+
 @dataclass(frozen=True)
 class CampaignResult:
     """Everything a campaign measured: per-episode rows and per-method summaries."""
@@ -531,7 +588,7 @@ class CampaignResult:
 
     def to_json(self) -> dict:
         """JSON-serialisable form (per-episode solve times are pooled into the summary)."""
-        rows = [{k: v for k, v in r.items() if k not in ("solve_times_s", "run")} for r in self.results]
+        rows = [{k: v for k, v in r.items() if k not in _POOLED_KEYS} for r in self.results]
         return {
             "family": self.family, "seed": self.seed, "episodes": list(self.episodes),
             "methods": list(self.methods), "c_min": self.c_min, "duration_s": self.duration_s,
@@ -591,7 +648,10 @@ def run_campaign(family: str, episodes: list[int] | range, methods: list[str] | 
 
 
 def _fmt(x: Any, spec: str) -> str:
-    return "-" if x is None else format(x, spec)
+    if x is None:
+        width = "".join(ch for ch in spec.split(".")[0] if ch.isdigit())
+        return format("-", f">{width}") if width else "-"
+    return format(x, spec)
 
 
 def format_table(result: CampaignResult) -> str:
@@ -613,6 +673,21 @@ def format_table(result: CampaignResult) -> str:
             f"{_fmt(s['failed_share'], '8.4f')}{s['episodes_with_slack']:>7}"
             f"{_fmt(s['solve_time_median_ms'], '9.1f')}/{_fmt(s['solve_time_p99_ms'], '<8.1f')}"
         )
+    lines.append("")
+    lines.append(f"{'method':<14}{'near pairs':>11}{'hits':>6}  {'near freq [95% CI]':<28}{'E[coll] bound':>14}{'observed':>9}"
+                 f"{'NEES drone':>11}{'>95%':>7}{'NEES rel':>10}{'>95%':>7}{'step err med/p95 m':>20}")
+    for m, s in result.summary.items():
+        alo, ahi = s["active_pair_ci95"]
+        near = f"{_fmt(s['active_pair_frequency'], '.2e')} [{alo:.1e}, {ahi:.1e}]"
+        lines.append(
+            f"{m:<14}{s['active_pairs']:>11}{s['active_pair_collisions']:>6}  {near:<28}{s['predicted_collisions_bound']:>14.2f}"
+            f"{s['pair_step_collisions']:>9}{_fmt(s['drone_nees_mean'], '11.2f')}{_fmt(s['drone_nees_share_above_chi2_95'], '7.3f')}"
+            f"{_fmt(s['relative_nees_mean'], '10.2f')}{_fmt(s['relative_nees_share_above_chi2_95'], '7.3f')}"
+            f"{_fmt(s['model_step_error_median_m'], '12.3f')}/{_fmt(s['model_step_error_p95_m'], '<7.3f')}"
+        )
+    lines.append(f"(near: (step, obstacle) pairs with realised contour < {ACTIVE_CONTOUR}; E[coll] bound: sum over pairs of "
+                 f"Phi(-r(realised contour)); NEES: 3 and 5 % above the chi2_3 95 % quantile if the filters are consistent; "
+                 f"step err: true displacement over one step minus tau * V_1)")
     lines.append(f"(step freq: true collisions per step and in-range obstacle; <c_min: share of in-range (step, obstacle) "
                  f"pairs whose realised contour of touch fell below c_min; failed: share of replans; slack: episodes "
                  f"with slack; {result.wall_time_s:.0f} s on {result.workers} worker(s))")

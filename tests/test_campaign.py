@@ -10,6 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy.stats import norm
 
 from companion.campaign import (
     FAMILIES,
@@ -31,6 +32,7 @@ from companion.campaign import (
 )
 from companion.cli import main
 from companion.errors import InputError
+from companion.overlap import touch_radius
 from companion.scenario import load_scenario as companion_load
 from mavsim.lockstep import LockstepSimulator
 from mavsim.scenario import load_scenario as mavsim_load
@@ -138,9 +140,12 @@ def test_that_the_bound_is_phi_of_minus_the_touch_radius():
 
 
 def _record(t, drone, obstacles, contours, status="optimal"):
+    drone = np.array(drone, float)
     return SimpleNamespace(t_link_s=t, status=status, slack_max=0.0, solve_time_s=0.01, command=np.zeros(3),
-                           drone_position=np.array(drone, float), realised_contour=contours,
-                           obstacle_positions={k: np.array(v, float) for k, v in obstacles.items()})
+                           drone_position=drone, drone_cov=0.01 * np.eye(3), realised_contour=contours,
+                           plan_positions=drone + np.array([[0.3, 0.0, 0.0]] * 28),
+                           obstacle_positions={k: np.array(v, float) for k, v in obstacles.items()},
+                           obstacle_covs={k: 0.01 * np.eye(3) for k in obstacles})
 
 
 def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
@@ -171,6 +176,16 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
     assert s["contour_pairs"] == 5 and s["contour_pairs_below_c_min"] == 2 and s["steps_below_c_min"] == 2
     assert s["min_realised_contour"] == pytest.approx(0.1)
     assert s["failed_plans"] == 1 and s["slack_plans"] == 1
+    # near pairs (contour < 0.99): a@0.3 (hit), b@0.3, a@0.6, b@0.6 (0.85 m >= 0.8 m: miss)
+    assert s["active_pairs"] == 4 and s["active_pair_collisions"] == 1
+    # Phi(-r(c)) summed over the in-range pairs; c = 1.0 contributes nothing
+    expected = sum(float(norm.cdf(-touch_radius(c, 3))) for c in (0.99, 0.2, 0.95, 0.95, 0.1))
+    assert s["predicted_collisions_bound"] == pytest.approx(expected)
+    # NEES e' (S_d + S_o)^-1 e of the relative position: errors 0, 0.05, 0, 0, 0.15 m over 0.02 m^2
+    assert s["relative_nees"] == pytest.approx([0.0, 0.05**2 / 0.02, 0.0, 0.0, 0.15**2 / 0.02])
+    assert s["drone_nees"] == [0.0, 0.0, 0.0]
+    # the drone truly stood still while each plan moved it 0.3 m over the first step
+    assert s["model_step_error_m"] == pytest.approx([0.3, 0.3])
     assert s["obstacle_collision"] and s["collided"]
 
 
