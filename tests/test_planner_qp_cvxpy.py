@@ -24,7 +24,8 @@ TAU = 0.5
 def _case(formulation: str) -> tuple[PlannerConfig, PlanRequest, np.ndarray]:
     cfg = PlannerConfig(formulation=formulation, horizon_steps=N, step_s=TAU, c_min=0.9, c_max=0.99,
                         velocity_max_mps=(2.0, 2.0, 1.0), accel_max_mps2=(1.0, 1.0, 0.5), drone_radius_m=0.3,
-                        sensing_range_m=15.0, weight_jerk=0.2, weight_velocity=0.05, trust_region_mps=0.8)
+                        sensing_range_m=15.0, weight_jerk=0.2, weight_velocity=0.05, trust_region_mps=0.8,
+                        solver_eps=1e-7, solver_eps_rel=1e-7)   # compare models, not tolerances
     t = np.arange(1, N + 1)[:, None] * TAU
     s_d = np.array([[0.03, 0.01, 0.0], [0.01, 0.02, 0.0], [0.0, 0.0, 0.02]])
     drone_covs = np.stack([s_d * (1.0 + 0.05 * i) for i in range(N)])

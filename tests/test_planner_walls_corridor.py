@@ -51,7 +51,7 @@ def test_that_the_deterministic_baseline_keeps_only_the_body_off_the_wall():
                       target=np.array([6.0, 4.0, -5.0]), walls_normal=[[0.0, 1.0, 0.0]], walls_offset=[1.5])
     plan = Planner(cfg).solve(req)
     assert plan.status == "optimal"
-    assert np.max(plan.positions[:, 1]) == pytest.approx(1.5 - 0.3, abs=2e-3)
+    assert np.max(plan.positions[:, 1]) == pytest.approx(1.5 - 0.3, abs=5e-3)     # back-off 3 mm
 
 
 def _escort(c_max: float | None, formulation: str) -> tuple[PlanRequest, object, PlannerConfig]:

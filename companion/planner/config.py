@@ -138,10 +138,10 @@ class PlannerConfig:
     solver_eps : float
         OSQP ``eps_abs``.
     solver_eps_rel : float
-        OSQP ``eps_rel``. Kept small because the dual tolerance is
-        ``eps_abs + eps_rel * max(|Px|, |A'y|, |q|)`` and ``q`` holds the slack penalty: with
-        ``eps_rel = 1e-5`` and a penalty of 1e3-1e4 the QP answers were loose enough to make
-        the SCP wander (measured).
+        OSQP ``eps_rel``. The dual tolerance is ``eps_abs + eps_rel * max(|Px|, |A'y|, |q|)``;
+        when the slack penalty sits in ``q`` (soft re-solve only, see ``scp``) it loosens
+        with the penalty. The rows carry a back-off (``formulations.BACKOFF_SIGMA``) that
+        covers the primal tolerance, so returned plans meet ``c_min`` exactly.
     solver_polish : bool
         Whether OSQP polishes its solution (active-set refinement).
     """
@@ -165,8 +165,8 @@ class PlannerConfig:
     scp_max_iterations: int = 15
     trust_region_mps: float = 1.0
     trust_region_lam: float = 0.25
-    solver_eps: float = 1e-5
-    solver_eps_rel: float = 1e-6
+    solver_eps: float = 1e-4
+    solver_eps_rel: float = 1e-4
     solver_polish: bool = False
 
     def __post_init__(self) -> None:

@@ -118,8 +118,38 @@ class QpLayout:
             self.row[name] = Block(start, size)
             start += size
         self.m = start
+        self._build_shift()
         self._build_a()
         self._build_p()
+
+    def _build_shift(self) -> None:
+        """``shift_rows``: row index of step ``i + 1`` for each row of step ``i`` (the last step repeats).
+
+        Used to carry OSQP's dual solution over to the next receding-horizon problem.
+        """
+        N, P, W = self.N, self.P, self.W
+        PN = P * N
+
+        def shifted(count: int, lead: int, tail: int) -> np.ndarray:
+            idx = np.arange(count).reshape(lead, N, tail) if count else np.zeros((0, N, tail), dtype=np.int64)
+            return np.concatenate([idx[:, 1:], idx[:, -1:]], axis=1).ravel()
+
+        parts = []
+        for name in ("dyn", "vbox", "accel"):
+            parts.append(self.row[name].start + shifted(3 * N, 1, 3))
+        for name in ("obs", "obs_hi", "adm", "lambox"):
+            size = self.row[name].size
+            parts.append(self.row[name].start + shifted(size, size // N if size else 0, 1))
+        parts.append(self.row["wall"].start + shifted(W * N, W, 1))
+        start = self.row["slack"].start
+        for name in ("s_lo", "s_hi", "e_pos", "e_neg", "s_wall"):
+            size = self.col[name].size
+            parts.append(start + shifted(size, size // N if size else 0, 1))
+            start += size
+        self.shift_rows = np.concatenate(parts).astype(np.int64)
+        if self.shift_rows.size != self.m:
+            raise RuntimeError("row shift map does not cover every row")  # a bug in this module
+        del PN
 
     # ------------------------------------------------------------------ constraint matrix
     def _build_a(self) -> None:

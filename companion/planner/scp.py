@@ -123,7 +123,9 @@ class _RequestData:
         for name in ("s_lo", "e_pos", "e_neg", "s_wall"):
             q[layout.col[name].slice] = cfg.slack_penalty * layout.slack_scale   # variable = slack / slack_scale
         q[layout.col["s_hi"].slice] = cfg.c_max_penalty * layout.slack_scale
-        self.q = q
+        self.q = q                                       # soft: slacks penalised
+        self.q_hard = q.copy()
+        self.q_hard[layout.slack_cols] = 0.0             # hard: slacks pinned to 0
         self.constant = wt * request.target @ m @ request.target + wj / tau**4 * float(np.sum(c * c))
         # A: constants plus wall normals (fixed for this request)
         self.a_slot = layout.a_data0.copy()
@@ -157,6 +159,7 @@ class _RequestData:
         else:
             self.in_range = np.zeros(0, dtype=bool)
         self.radius_sum = request.obstacle_radii + cfg.drone_radius_m
+        self.y_warm: np.ndarray | None = None
 
 
 class Planner:
@@ -180,6 +183,7 @@ class Planner:
         self.r_min = float(overlap.touch_radius(config.c_min, 3))
         self.r_max = None if config.c_max is None else float(overlap.touch_radius(config.c_max, 3))
         self._qps: dict[tuple[int, int, int], tuple[QpLayout, OsqpQp | None]] = {}
+        self._last_y: dict[tuple[int, int, int], np.ndarray] = {}
 
     # ------------------------------------------------------------------ public API
     def solve(self, request: PlanRequest, warm_start: Plan | None = None) -> Plan:
@@ -203,6 +207,9 @@ class Planner:
         self._check(request)
         layout = self._layout(request)
         data = _RequestData(self, layout, request)
+        last_y = self._last_y.get((layout.N, layout.P, layout.W))
+        if warm_start is not None and last_y is not None:
+            data.y_warm = last_y[layout.shift_rows]
         v_bar = self._initial_velocities(request, data.v0, warm_start)
         p_bar = request.position + cfg.step_s * np.cumsum(v_bar, axis=0)
         lam_bar = self._initial_lam(request, p_bar) if cfg.formulation == "paper" else None
@@ -229,6 +236,8 @@ class Planner:
             if small and self._recheck(request, data, step.positions)[1]:
                 converged = True
                 break
+        if step is not None:
+            self._last_y[(layout.N, layout.P, layout.W)] = step.solution.y
         if not converged and step is not None and len(notes) == 0:
             notes.append("max_iterations")
         return self._finish(request, data, step, v_bar, iterations, notes, t0)
@@ -316,6 +325,8 @@ class Planner:
                  p_bar: np.ndarray, lam_bar: np.ndarray | None, *, first: bool) -> QpStep:
         cfg = self.config
         N, P = layout.N, layout.P
+        if lam_bar is not None:
+            lam_bar = np.clip(lam_bar, F.LAM_EPS, 1.0 - F.LAM_EPS)     # OSQP meets the box only to tolerance
         rows = self.linearise(request, p_bar, lam_bar, data.in_range)
         a_slot = data.a_slot
         a_slot[layout.slot["obs_p"].slice] = rows.coef_p.ravel()
@@ -342,20 +353,37 @@ class Planner:
         a_data = layout.a_csc_data(a_slot)
         key = (N, P, layout.W)
         qp = self._qps[key][1]
+        # Hard first: slacks pinned to 0 (rows "0 <= s <= 0", no penalty in q). With the L1
+        # penalty in place every "s >= 0" row carries a dual equal to the penalty, which
+        # OSQP needs hundreds to thousands of iterations to settle (measured); pinned, they
+        # are equality rows it handles at once. Only if the hard QP is infeasible is it
+        # solved again with the slacks free and penalised.
+        slack_rows = layout.row["slack"].slice
+        u[slack_rows] = 0.0
         if qp is None:
-            qp = OsqpQp(layout, data.p_data, data.q, a_data, l, u, eps=cfg.solver_eps, eps_rel=cfg.solver_eps_rel,
+            qp = OsqpQp(layout, data.p_data, data.q_hard, a_data, l, u, eps=cfg.solver_eps, eps_rel=cfg.solver_eps_rel,
                         polish=cfg.solver_polish)
             self._qps[key] = (layout, qp)
         else:
-            qp.update(p_data=data.p_data if first else None, q=data.q if first else None, a_data=a_data, l=l, u=u)
+            qp.update(p_data=data.p_data if first else None, q=data.q_hard, a_data=a_data, l=l, u=u)
+        x0 = None
         if first:
             x0 = np.zeros(layout.n)
             x0[layout.col["V"].slice] = v_bar.ravel()
             x0[layout.col["p"].slice] = p_bar.ravel()
             if layout.paper:
                 x0[layout.col["lam"].slice] = lam_bar.ravel()
-            qp.warm_start(x=x0)
+            # duals of the previous replan shifted by one step like the primal (None: cold)
+            qp.warm_start(x=x0, y=data.y_warm)
         sol = qp.solve()
+        if not sol.accurate:
+            u[slack_rows] = np.inf
+            qp.update(q=data.q, l=l, u=u)     # l and u together: OSQP 1.1 rejects a lone u against its scaled l on equality rows
+            if x0 is not None:
+                qp.warm_start(x=x0)
+            hard_status = sol.status
+            sol = qp.solve()
+            logger.debug("hard QP %s; soft QP %s", hard_status, sol.status)
         x = sol.x
         # cost at the solution with slacks clipped at 0: OSQP meets "s >= 0" only to its
         # tolerance, and a slightly negative slack times the large penalty would bias J
