@@ -127,8 +127,7 @@ class QpLayout:
 
         Used to carry OSQP's dual solution over to the next receding-horizon problem.
         """
-        N, P, W = self.N, self.P, self.W
-        PN = P * N
+        N, W = self.N, self.W
 
         def shifted(count: int, lead: int, tail: int) -> np.ndarray:
             idx = np.arange(count).reshape(lead, N, tail) if count else np.zeros((0, N, tail), dtype=np.int64)
@@ -149,7 +148,6 @@ class QpLayout:
         self.shift_rows = np.concatenate(parts).astype(np.int64)
         if self.shift_rows.size != self.m:
             raise RuntimeError("row shift map does not cover every row")  # a bug in this module
-        del PN
 
     # ------------------------------------------------------------------ constraint matrix
     def _build_a(self) -> None:
