@@ -52,7 +52,7 @@ from typing import Any, Callable
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from scipy.stats import beta, norm
+from scipy.stats import beta, chi2, norm
 
 from companion.errors import InputError
 from companion.harness import run_lockstep  # imports mavsim (the harness exception of the dependency rule)
@@ -423,7 +423,8 @@ def score_run(run: Any, data: dict) -> dict:
                 continue
             contour_pairs += 1
             min_contour = min(min_contour, ct)
-            bound_sum += float(norm.cdf(-touch_radius(ct, 3))) if ct < 1.0 else 0.0
+            # Phi(-r) with r = sqrt(chi2_3.ppf(c)): 1/2 for c = 0 (ellipsoids overlap), 0 for c = 1
+            bound_sum += float(norm.cdf(-math.sqrt(chi2.ppf(min(max(ct, 0.0), 1.0), 3))))
             if ct < c_min:
                 contour_below += 1
                 below_here = True

@@ -159,7 +159,7 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
         _record(0.0, [0, 0, 0], {key_a: [5, 0, 0], key_b: [20, 0, 0]}, {key_a: 0.99, key_b: 1.0}),
         _record(0.05, [0, 0, 0], {key_a: [5, 0, 0]}, {key_a: 0.5}, status="failed"),  # off the 0.3 s grid
         _record(0.3, [0, 0, 0], {key_a: [0.9, 0, 0], key_b: [9, 0, 0]}, {key_a: 0.2, key_b: 0.95}, status="slack"),
-        _record(0.6, [0, 0, 0], {key_a: [3, 0, 0], key_b: [0.7, 0, 0]}, {key_a: 0.95, key_b: 0.1}),
+        _record(0.6, [0, 0, 0], {key_a: [3, 0, 0], key_b: [0.7, 0, 0]}, {key_a: 0.95, key_b: 0.0}),
     ]
     truth_at = [
         (0.0, np.zeros(3), {"a": np.array([5.0, 0, 0]), "b": np.array([20.0, 0, 0])}),
@@ -174,12 +174,13 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
     assert s["pair_steps_in_range"] == 1 + 2 + 2
     assert s["pair_step_collisions"] == 1
     assert s["contour_pairs"] == 5 and s["contour_pairs_below_c_min"] == 2 and s["steps_below_c_min"] == 2
-    assert s["min_realised_contour"] == pytest.approx(0.1)
+    assert s["min_realised_contour"] == 0.0
     assert s["failed_plans"] == 1 and s["slack_plans"] == 1
     # near pairs (contour < 0.99): a@0.3 (hit), b@0.3, a@0.6, b@0.6 (0.85 m >= 0.8 m: miss)
     assert s["active_pairs"] == 4 and s["active_pair_collisions"] == 1
     # Phi(-r(c)) summed over the in-range pairs; c = 1.0 contributes nothing
-    expected = sum(float(norm.cdf(-touch_radius(c, 3))) for c in (0.99, 0.2, 0.95, 0.95, 0.1))
+    # (c = 0: the inflated ellipsoids overlap, Phi(0) = 1/2)
+    expected = sum(float(norm.cdf(-touch_radius(c, 3))) for c in (0.99, 0.2, 0.95, 0.95)) + 0.5
     assert s["predicted_collisions_bound"] == pytest.approx(expected)
     # NEES e' (S_d + S_o)^-1 e of the relative position: errors 0, 0.05, 0, 0, 0.15 m over 0.02 m^2
     assert s["relative_nees"] == pytest.approx([0.0, 0.05**2 / 0.02, 0.0, 0.0, 0.15**2 / 0.02])
