@@ -60,12 +60,18 @@ def plot_campaign(summary: dict, directory: str | Path, *, c_min: float, title: 
     written.append(path)
 
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
-    for m in methods:
+    styles = ("-", "--", "-.", ":")
+    for i, m in enumerate(methods):
         values = np.sort([v for v in summary[m]["min_realised_contour"] if v is not None])
         if values.size:
-            ax.step(values, np.arange(1, values.size + 1) / values.size, where="post", label=f"{m} ({values.size})")
-    ax.axvline(c_min, color="k", linestyle="--", linewidth=1, label=f"c_min = {c_min:.2f}")
-    ax.set_xlim(0.0, 1.0)
+            # ECDF, closed on the right at c = 1 (most episodes never come near: c = 1.0)
+            x = np.concatenate([[0.0], values, [1.0]])
+            y = np.concatenate([[0.0], np.arange(1, values.size + 1) / values.size, [1.0]])
+            below = int(np.sum(values < c_min))
+            ax.step(x, y, where="post", linestyle=styles[i % len(styles)], linewidth=1.5,
+                    label=f"{m}: {below}/{values.size} below c_min")
+    ax.axvline(c_min, color="k", linestyle="--", linewidth=0.8, label=f"c_min = {c_min:.2f}")
+    ax.set_xlim(0.0, 1.02)
     ax.set_xlabel("smallest realised contour of touch in the episode")
     ax.set_ylabel("share of episodes (ECDF)")
     ax.set_title(f"{title}: smallest contour of touch")
