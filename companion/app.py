@@ -122,6 +122,7 @@ class Companion:
         self._dt = 1.0 / lp.setpoint_rate_hz
         self._statics = scenario.static_obstacles
         self._ignored_keys: set[tuple[int, int]] = set()
+        self._reported_cov: np.ndarray | None = None  # the autopilot's own position covariance (ODOMETRY), m^2
 
     # ------------------------------------------------------------------ inbound
 
@@ -171,6 +172,8 @@ class Companion:
             result = self.drone.update(obs.t_s, obs.position_ned, obs.velocity_ned, obs.position_var, obs.velocity_var)
             if result.accepted:
                 self._offsets.append((t_rx, t_rx - obs.t_s))
+                if obs.position_cov is not None:
+                    self._reported_cov = obs.position_cov
             else:
                 self.state.drone_rejections += 1
             return
@@ -271,12 +274,30 @@ class Companion:
         s = min(length, max(0.0, along) + self.scenario.mission.waypoint_spacing_m)
         return start + route * (s / length)
 
+    def _leads_the_way(self, position: np.ndarray, obstacle: np.ndarray) -> bool:
+        """Whether an obstacle is between the drone and its goal along the line to the goal.
+
+        The ``c_max`` upper bound (keep the ``c_max`` contours touching) is meant for
+        following an obstacle that leads the way through a tight space; it is released
+        once that obstacle is behind the drone or past the goal, so the drone stops at
+        its goal instead of being dragged along.
+        """
+        to_goal = self.scenario.mission.goal - position
+        length = float(np.linalg.norm(to_goal))
+        if length < 1e-9:
+            return False
+        along = float(np.dot(obstacle - position, to_goal) / length)
+        return 0.0 < along < length
+
     def _replan(self, t_s: float, t_v: float, out: list) -> None:
         est = self.drone.state
         n, tau = self.cfg.horizon_steps, self.cfg.step_s
         lag = max(0.0, t_v - est.t_s)
         position = est.position + est.velocity * lag
-        cov_now = est.position_cov + self.loop.drone_cov_floor_m2 * np.eye(3)
+        if self.loop.drone_covariance == "reported" and self._reported_cov is not None:
+            cov_now = self._reported_cov + self.loop.drone_cov_floor_m2 * np.eye(3)
+        else:
+            cov_now = est.position_cov + self.loop.drone_cov_floor_m2 * np.eye(3)
         if self.loop.drone_covariance == "predicted":
             drone_covs = self.drone.predict_position_covariances(t_v, np.zeros((n, 3)), tau) + self.loop.drone_cov_floor_m2 * np.eye(3)
         else:
@@ -301,6 +322,7 @@ class Companion:
             covs.append(np.broadcast_to(s.covariance, (n, 3, 3)))
             radii.append(s.radius)
         target = self._target(position)
+        leading = [self._leads_the_way(position, now_pos[k]) for k in keys] + [False] * len(self._statics)
         request = PlanRequest(
             position=position,
             velocity=self._command.copy(),
@@ -311,6 +333,7 @@ class Companion:
             obstacle_radii=np.array(radii, dtype=float),
             walls_normal=self.scenario.walls_normal,
             walls_offset=self.scenario.walls_offset,
+            upper_bound_mask=np.array(leading, dtype=bool),
         )
         plan = self.planner.solve(request, warm_start=self._plan)
         self._last_replan_t = t_s

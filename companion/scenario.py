@@ -97,17 +97,22 @@ class LoopConfig:
     setpoint_rate_hz : rate of SET_POSITION_TARGET_LOCAL_NED while streaming (>= 10 Hz).
     estimate_timeout_s : drone estimate older than this is stale: brake.
     obstacle_radius_m : body radius assumed for tracked obstacles (MAVLink does not carry one).
-    drone_covariance : ``"estimate"`` holds the drone filter's current position covariance
-        over the horizon (the paper's model: the autopilot closes the loop, so open-loop
-        growth does not apply); ``"predicted"`` uses the filter's open-loop prediction.
+    drone_covariance : where the drone's planning covariance comes from, held over the horizon
+        (the autopilot closes the loop, so open-loop growth does not apply):
+        ``"reported"`` (default) uses the autopilot's own estimate covariance from
+        ``ODOMETRY`` (PX4's EKF has already filtered; its errors are correlated in time,
+        so re-filtering them as independent measurements would be overconfident), and
+        the filter's covariance while none is reported; ``"estimate"`` always uses the
+        companion filter's covariance; ``"predicted"`` uses its open-loop prediction.
     drone_cov_floor_m2 : isotropic floor added to the drone's planning covariance.
+
     prestream_s, retry_period_s, max_retries, reengage : OFFBOARD engagement (see ``companion.offboard``).
     """
 
     setpoint_rate_hz: float = 20.0
     estimate_timeout_s: float = 0.5
     obstacle_radius_m: float = 0.5
-    drone_covariance: str = "estimate"
+    drone_covariance: str = "reported"
     drone_cov_floor_m2: float = 0.0
     prestream_s: float = 1.0
     retry_period_s: float = 1.0
@@ -117,8 +122,8 @@ class LoopConfig:
     def __post_init__(self) -> None:
         if not self.setpoint_rate_hz >= 10.0:
             raise ConfigError(f"[companion] setpoint_rate_hz must be >= 10 Hz (PX4 needs > 2 Hz), got {self.setpoint_rate_hz!r}")
-        if self.drone_covariance not in ("estimate", "predicted"):
-            raise ConfigError(f"[companion] drone_covariance must be 'estimate' or 'predicted', got {self.drone_covariance!r}")
+        if self.drone_covariance not in ("reported", "estimate", "predicted"):
+            raise ConfigError(f"[companion] drone_covariance must be 'reported', 'estimate' or 'predicted', got {self.drone_covariance!r}")
 
 
 @dataclass(frozen=True)

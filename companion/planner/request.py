@@ -76,6 +76,10 @@ class PlanRequest:
         Unit normals ``a`` of half-spaces ``a . p <= b`` of free space (normalised here).
     walls_offset : (W,) array
         Offsets ``b``, metres.
+    upper_bound_mask : (P,) bool array, optional
+        Obstacles the ``c_max`` upper bound applies to (default: all in sensing range).
+        The caller decides which obstacle the drone is following, e.g. the one leading
+        the way to the goal in a corridor; the bound is released for the others.
     """
 
     position: np.ndarray
@@ -87,6 +91,7 @@ class PlanRequest:
     obstacle_radii: np.ndarray = field(default_factory=lambda: np.zeros(0))
     walls_normal: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     walls_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    upper_bound_mask: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -124,6 +129,15 @@ class PlanRequest:
         unit = normals / norms[:, None]
         set_("walls_normal", _array("walls_normal", unit, (w, 3)))
         set_("walls_offset", _array("walls_offset", offsets / norms, (w,)))
+        if self.upper_bound_mask is None:
+            mask = np.ones(p, dtype=bool)
+        else:
+            mask = np.asarray(self.upper_bound_mask)
+            if mask.shape != (p,) or mask.dtype != bool:
+                raise InputError(f"upper_bound_mask must be a boolean array of shape ({p},), got {self.upper_bound_mask!r}")
+            mask = mask.copy()
+        mask.setflags(write=False)
+        set_("upper_bound_mask", mask)
 
     @property
     def horizon_steps(self) -> int:

@@ -158,6 +158,7 @@ class _RequestData:
             self.in_range = dist <= cfg.sensing_range_m
         else:
             self.in_range = np.zeros(0, dtype=bool)
+        self.upper_active = self.in_range & request.upper_bound_mask  # obstacles c_max applies to
         self.radius_sum = request.obstacle_radii + cfg.drone_radius_m
         self.y_warm: np.ndarray | None = None
 
@@ -334,7 +335,8 @@ class Planner:
         l[layout.row["obs"].slice], u[layout.row["obs"].slice] = rows.lower.ravel(), np.inf
         if layout.upper:
             a_slot[layout.slot["obs_hi_p"].slice] = rows.coef_p.ravel()
-            l[layout.row["obs_hi"].slice], u[layout.row["obs_hi"].slice] = -np.inf, rows.upper.ravel()
+            upper = np.where(data.upper_active[:, None], rows.upper, np.inf)  # c_max released where masked
+            l[layout.row["obs_hi"].slice], u[layout.row["obs_hi"].slice] = -np.inf, upper.ravel()
         # velocity box ∩ trust region around the iterate
         vmax, tr = cfg.velocity_max, cfg.trust_region_mps
         v_lo, v_hi = np.maximum(-vmax, v_bar - tr), np.minimum(vmax, v_bar + tr)
@@ -434,7 +436,7 @@ class Planner:
             slack = [step.slack_obstacle[data.in_range].ravel(), step.slack_wall.ravel()]
             slack_max = float(max((float(s.max()) for s in slack if s.size), default=0.0))
             cost = step.objective
-            upper = float(step.slack_upper[data.in_range].max(initial=0.0))
+            upper = float(step.slack_upper[data.upper_active].max(initial=0.0))
             if upper > SLACK_TOL:
                 notes.append(f"c_max_violated: slack {upper:.3g}")
         figs, ok = self._recheck(request, data, positions)
