@@ -6,6 +6,7 @@ import argparse
 import json
 import logging
 import sys
+import time
 
 from companion.app import Companion
 from companion.link import DEFAULT_URL, open_link
@@ -62,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
         return c.sequencer.phase.name == "GAVE_UP"
 
     link = open_link(args.connect, tlog=args.tlog)
+    started = time.time()
     try:
         stats = run_realtime(companion, link, duration_s=args.duration, stop=stop)
     except KeyboardInterrupt:
@@ -69,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
     finally:
         link.close()
     report = companion_report(companion)
+    for key in ("events", "failsafe_events"):  # seconds since the start of this run, not epoch
+        report[key] = [(round(t - started, 2), text) for t, text in report[key]]
     if stats is not None:
         report["ticks"], report["late_ticks"] = stats.ticks, stats.late_ticks
     if args.json:
