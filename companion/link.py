@@ -153,8 +153,14 @@ class Link(abc.ABC):
 
     # ------------------------------------------------------------------ sending
 
-    def send(self, msg: mavlink2.MAVLink_message) -> bytes:
+    def send(self, msg: mavlink2.MAVLink_message, t_s: float | None = None) -> bytes:
         """Pack ``msg`` with our identity and the next sequence number, send it, log it.
+
+        Parameters
+        ----------
+        msg : the message.
+        t_s : the time the message belongs to (the control loop's tick), stamped in the
+            tlog so a replay ticks at exactly the same times; default: the link's clock now.
 
         Returns
         -------
@@ -170,7 +176,7 @@ class Link(abc.ABC):
             raise LinkError(f"{self!r} is closed")
         packet = bytes(msg.pack(self._mav))
         self._mav.seq = (self._mav.seq + 1) % 256
-        t_s = self.clock()
+        t_s = self.clock() if t_s is None else float(t_s)
         self._write(packet)
         self.stats.sent += 1
         self.stats.bytes_out += len(packet)

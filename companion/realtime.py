@@ -58,7 +58,7 @@ def run_realtime(
             companion.handle(rx)
         if now >= next_tick:
             for msg in companion.tick(now):
-                link.send(msg)
+                link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times
             stats.ticks += 1
             next_tick += period
             if next_tick < now:
