@@ -356,7 +356,7 @@ def replay(
         assume_engaged = mode == "what-if"
     notes = []
     if mode == "compare" and not lockstep:
-        notes.append("real-time log: ticks are timed by their first packet's stamp; expect timing-level differences")
+        notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
 
     companion = Companion(scenario, offboard=offboard)
     if assume_engaged:

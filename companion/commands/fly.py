@@ -42,6 +42,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def microsecond_clock() -> float:
+    """Unix time rounded to whole microseconds: the times the loop acts on are exactly the
+    times a tlog can store, so a recorded flight replays tick for tick."""
+    return round(time.time() * 1e6) * 1e-6
+
+
 def run(args: argparse.Namespace) -> int:
     overrides = {"formulation": args.formulation} if args.formulation else {}
     scenario = load_scenario(args.scenario, **overrides)
@@ -62,10 +68,10 @@ def run(args: argparse.Namespace) -> int:
             return c.records[-1].t_link_s - t_goal >= args.exit_after_goal
         return c.sequencer.phase.name == "GAVE_UP"
 
-    link = open_link(args.connect, tlog=args.tlog)
-    started = time.time()
+    link = open_link(args.connect, tlog=args.tlog, clock=microsecond_clock)
+    started = microsecond_clock()
     try:
-        stats = run_realtime(companion, link, duration_s=args.duration, stop=stop)
+        stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock)
     except KeyboardInterrupt:
         stats = None
     finally:
