@@ -24,7 +24,8 @@ TAU = 0.5
 def _case(formulation: str) -> tuple[PlannerConfig, PlanRequest, np.ndarray]:
     cfg = PlannerConfig(formulation=formulation, horizon_steps=N, step_s=TAU, c_min=0.9, c_max=0.99,
                         velocity_max_mps=(2.0, 2.0, 1.0), accel_max_mps2=(1.0, 1.0, 0.5), drone_radius_m=0.3,
-                        sensing_range_m=15.0, weight_jerk=0.2, weight_velocity=0.05, trust_region_mps=0.8,
+                        sensing_range_m=15.0, weight_jerk=0.2, weight_velocity=0.05, weight_progress=0.4,
+                        trust_region_mps=0.8,
                         solver_eps=1e-7, solver_eps_rel=1e-7)   # compare models, not tolerances
     t = np.arange(1, N + 1)[:, None] * TAU
     s_d = np.array([[0.03, 0.01, 0.0], [0.01, 0.02, 0.0], [0.0, 0.0, 0.02]])
@@ -80,7 +81,9 @@ def _cvxpy_qp(cfg: PlannerConfig, req: PlanRequest, v_bar: np.ndarray, rows, lam
     m = np.linalg.inv(req.drone_covs[-1])
     vs = [req.velocity] + [V[i] for i in range(N)]
     jerk = sum(cp.sum_squares(vs[i + 1] - 2 * vs[i] + vs[i - 1]) for i in range(1, N)) / TAU**4
+    progress = sum(cp.quad_form(p[i] - req.target, 0.5 * (m + m.T)) for i in range(N)) / N
     cost = (cfg.weight_terminal * cp.quad_form(p[-1] - req.target, 0.5 * (m + m.T)) + cfg.weight_jerk * jerk
+            + cfg.weight_progress * progress
             + cfg.weight_velocity * cp.sum_squares(V)
             + cfg.slack_penalty * (cp.sum(s[in_range]) + cp.sum(s_w)) + cfg.c_max_penalty * cp.sum(s_hi[in_range]))
     if e is not None:

@@ -22,7 +22,7 @@ T0 = 1_700_000_000.0  # a Unix time, outside the lockstep epoch window
 def antipodal(tmp_path_factory):
     """A 20 s lockstep demo run that recorded its link."""
     path = tmp_path_factory.mktemp("replay") / "a.tlog"
-    run = run_lockstep(SCENARIO, seed=0, tlog_path=path, duration_s=20)
+    run = run_lockstep(SCENARIO, seed=0, tlog_path=path, duration_s=20, stop_after_goal_s=None)
     return run, path
 
 

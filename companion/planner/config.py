@@ -116,6 +116,10 @@ class PlannerConfig:
         Weight of the terminal Mahalanobis cost ``(p_N - g)' S_N^-1 (p_N - g)``.
     weight_jerk : float
         Weight of the jerk cost ``sum |(V_{i+1} - 2 V_i + V_{i-1}) / tau^2|^2``, s^6/m^2.
+    weight_progress : float
+        Weight of the progress cost ``(1/N) sum_i (p_i - g)' S_N^-1 (p_i - g)`` (same metric
+        as the terminal cost): the drone gets to the target promptly instead of closing in
+        asymptotically. 0 gives the paper's terminal-only cost.
     weight_velocity : float
         Weight of a small effort term ``sum |V_i|^2`` (regularisation), s^2/m^2.
     slack_penalty : float
@@ -159,6 +163,7 @@ class PlannerConfig:
     weight_terminal: float = 1.0
     weight_jerk: float = 0.05
     weight_velocity: float = 0.1
+    weight_progress: float = 0.0
     slack_penalty: float = 1e3
     c_max_penalty: float = 100.0
     scp_tolerance: float = 1e-3
@@ -188,6 +193,7 @@ class PlannerConfig:
         set_("weight_terminal", _positive("weight_terminal", self.weight_terminal))
         set_("weight_jerk", _nonnegative("weight_jerk", self.weight_jerk))
         set_("weight_velocity", _nonnegative("weight_velocity", self.weight_velocity))
+        set_("weight_progress", _nonnegative("weight_progress", self.weight_progress))
         set_("slack_penalty", _positive("slack_penalty", self.slack_penalty))
         set_("c_max_penalty", _positive("c_max_penalty", self.c_max_penalty))
         set_("scp_tolerance", _positive("scp_tolerance", self.scp_tolerance))

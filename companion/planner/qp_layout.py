@@ -243,16 +243,18 @@ class QpLayout:
         for r_, c_, v_ in zip(vr, vc, vv):            # setup only, O(N) entries
             self.p_vel_jerk[lookup[int(r_ * (3 * N) + c_)]] += v_
         self.p_vel_diag = np.isin(key, diag * (3 * N) + diag).astype(float)
-        # terminal block on p_N (upper triangle of 3x3)
-        pn = self.col["p"].start + 3 * (N - 1)
+        # position blocks p_1..p_N (upper triangle of 3x3): progress cost on every step,
+        # plus the terminal cost on p_N
         tr, tc = np.triu_indices(3)
         self.p_term_idx = (tr, tc)
-        rows = np.concatenate([self.p_vel_rows, pn + tr])
-        cols = np.concatenate([self.p_vel_cols, pn + tc])
+        starts = self.col["p"].start + 3 * np.arange(N)
+        rows = np.concatenate([self.p_vel_rows, (starts[:, None] + tr).ravel()])
+        cols = np.concatenate([self.p_vel_cols, (starts[:, None] + tc).ravel()])
         self.p_n_vel = key.size
         self.p_indices, self.p_indptr, self.p_perm = _csc_pattern(rows, cols, (self.n, self.n))
 
-    def p_data(self, jerk_scale: float, effort_scale: float, terminal: np.ndarray) -> np.ndarray:
+    def p_data(self, jerk_scale: float, effort_scale: float, terminal: np.ndarray,
+               stage: np.ndarray | None = None) -> np.ndarray:
         """P data (CSC order) for ``0.5 x'Px``.
 
         Parameters
@@ -263,9 +265,13 @@ class QpLayout:
             Multiplies the identity on the velocity block.
         terminal : (3, 3) array
             Hessian block on ``p_N`` (symmetric; its upper triangle is used).
+        stage : (3, 3) array, optional
+            Hessian block on every ``p_i`` (progress cost), added to the terminal block on ``p_N``.
         """
         vel = jerk_scale * self.p_vel_jerk + effort_scale * self.p_vel_diag
-        data = np.concatenate([vel, terminal[self.p_term_idx]])
+        blocks = np.zeros((self.N, 3, 3)) if stage is None else np.broadcast_to(stage, (self.N, 3, 3)).copy()
+        blocks[-1] += terminal
+        data = np.concatenate([vel, blocks[:, self.p_term_idx[0], self.p_term_idx[1]].ravel()])
         return data[self.p_perm]
 
     def p_matrix(self, data_csc: np.ndarray) -> sp.csc_matrix:

@@ -112,21 +112,26 @@ class _RequestData:
         m = 0.5 * (m + m.T)
         wt, wj, wv = cfg.weight_terminal, cfg.weight_jerk, cfg.weight_velocity
         jerk_scale = 2.0 * wj / tau**4
-        self.p_data = layout.p_data(jerk_scale, 2.0 * wv, 2.0 * wt * m)
+        # progress: (w_p / N) sum_i (p_i - g)' M (p_i - g): without it the plan only has to be
+        # at the target at step N, so each replan arrives "N steps from now" and the drone
+        # closes in asymptotically
+        wp = cfg.weight_progress / N
+        self.p_data = layout.p_data(jerk_scale, 2.0 * wv, 2.0 * wt * m, 2.0 * wp * m)
         # jerk: |D2 V + c|^2 / tau^4 per axis with c_0 = V_0  ->  q += 2 w_j/tau^4 D2' c
         c = np.zeros((N - 1, 3))
         c[0] = self.v0
         q = np.zeros(layout.n)
         q[layout.col["V"].slice] = (jerk_scale * (layout.d2.T @ c)).ravel()
         pn = layout.col["p"].start + 3 * (N - 1)
-        q[pn:pn + 3] = -2.0 * wt * (m @ request.target)
+        q[layout.col["p"].slice] = np.tile(-2.0 * wp * (m @ request.target), N)
+        q[pn:pn + 3] += -2.0 * wt * (m @ request.target)
         for name in ("s_lo", "e_pos", "e_neg", "s_wall"):
             q[layout.col[name].slice] = cfg.slack_penalty * layout.slack_scale   # variable = slack / slack_scale
         q[layout.col["s_hi"].slice] = cfg.c_max_penalty * layout.slack_scale
         self.q = q                                       # soft: slacks penalised
         self.q_hard = q.copy()
         self.q_hard[layout.slack_cols] = 0.0             # hard: slacks pinned to 0
-        self.constant = wt * request.target @ m @ request.target + wj / tau**4 * float(np.sum(c * c))
+        self.constant = (wt + wp * N) * request.target @ m @ request.target + wj / tau**4 * float(np.sum(c * c))
         # A: constants plus wall normals (fixed for this request)
         self.a_slot = layout.a_data0.copy()
         if layout.W:
