@@ -8,7 +8,7 @@ import numpy as np
 
 from companion.app import Companion
 
-_FAILSAFE_WORDS = ("brak", "stale", "took over", "HEARTBEAT", "GAVE_UP", "LINK_LOST")
+_FAILSAFE_WORDS = ("braking", "stale", "PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP", "slack used")
 
 
 def companion_report(companion: Companion) -> dict:
