@@ -464,7 +464,7 @@ def score_run(run: Any, data: dict) -> dict:
         "replans": len(records),
         "failed_plans": statuses.count("failed"),
         "slack_plans": statuses.count("slack"),
-        "slack_max": max((r.slack_max for r in records), default=0.0),
+        "slack_max": max((r.slack_max for r in records if r.status != "failed"), default=0.0),  # failed: inf
         "solve_times_s": [float(r.solve_time_s) for r in records],
         "sim_time_s": float(run.sim_time_s),
         "commands_sha256": hashlib.sha256(np.ascontiguousarray(commands).tobytes()).hexdigest(),
@@ -568,6 +568,17 @@ def summarise(results: list[dict], methods: tuple[str, ...] | list[str], c_min: 
 # --------------------------------------------------------------------------- campaign
 
 
+def _finite(obj: Any) -> Any:
+    """``obj`` with non-finite floats replaced by ``None`` (strict JSON has no inf or NaN)."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
 #: Per-step lists in an episode row, pooled into the summary and left out of the JSON rows.
 _POOLED_KEYS = ("solve_times_s", "drone_nees", "relative_nees", "model_step_error_m", "run")
 
@@ -590,13 +601,13 @@ class CampaignResult:
     def to_json(self) -> dict:
         """JSON-serialisable form (per-episode solve times are pooled into the summary)."""
         rows = [{k: v for k, v in r.items() if k not in _POOLED_KEYS} for r in self.results]
-        return {
+        return _finite({
             "family": self.family, "seed": self.seed, "episodes": list(self.episodes),
             "methods": list(self.methods), "c_min": self.c_min, "duration_s": self.duration_s,
             "r_min": float(touch_radius(self.c_min, 3)), "bound_phi_minus_r_min": collision_bound(self.c_min),
             "workers": self.workers, "wall_time_s": self.wall_time_s, "cpu_count": os.cpu_count(),
             "summary": self.summary, "results": rows,
-        }
+        })
 
     def plot(self, directory: str | Path) -> list[Path]:
         """Draw the campaign figures into ``directory`` (see :mod:`companion.plots.campaign_figures`)."""

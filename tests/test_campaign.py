@@ -210,7 +210,7 @@ def test_that_a_tiny_campaign_runs_and_reports_every_method(tiny_campaign, tmp_p
         assert s["bound_phi_minus_r_min"] == pytest.approx(collision_bound(0.90))
     table = format_table(res)
     assert "hyperplane" in table and "deterministic" in table and "Phi(-r_min)" in table
-    doc = json.loads(json.dumps(res.to_json()))
+    doc = json.loads(json.dumps(res.to_json(), allow_nan=False))  # strict JSON: no inf/NaN
     assert doc["summary"]["hyperplane"]["episodes"] == 2 and len(doc["results"]) == 4
     written = res.plot(tmp_path / "fig")
     assert [p.name for p in written] == ["collision_rate.png", "min_contour_ecdf.png"]

@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(result.to_json(), indent=1, default=float))
+        path.write_text(json.dumps(result.to_json(), indent=1, default=float, allow_nan=False))
         print(f"wrote {path}")
     if args.plot:
         for path in result.plot(args.plot):
