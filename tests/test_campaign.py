@@ -167,7 +167,9 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
         (0.3, np.zeros(3), {"a": np.array([0.95, 0, 0]), "b": np.array([9.0, 0, 0])}),   # a: 0.95 < 1.0 hit
         (0.6, np.zeros(3), {"a": np.array([3.0, 0, 0]), "b": np.array([0.85, 0, 0])}),   # b: 0.85 >= 0.8 miss
     ]
-    run = SimpleNamespace(truth={"collided": True, "collisions": [{"kind": "obstacle"}], "goal_reached": False},
+    contacts = [{"kind": "obstacle", "t_start_s": 0.25, "t_end_s": 0.4}, {"kind": "wall", "t_start_s": 0.5, "t_end_s": 0.9},
+                {"kind": "obstacle", "t_start_s": 0.9, "t_end_s": None}]  # still in contact at the end (1.0 s)
+    run = SimpleNamespace(truth={"collided": True, "collisions": contacts, "goal_reached": False},
                           companion=SimpleNamespace(records=records), extra={"replan_truth": truth_at}, sim_time_s=1.0)
     s = score_run(run, data)
     assert s["steps"] == 3 and s["replans"] == 4
@@ -187,7 +189,9 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
     assert s["drone_nees"] == [0.0, 0.0, 0.0]
     # the drone truly stood still while each plan moved it 0.3 m over the first step
     assert s["model_step_error_m"] == pytest.approx([0.3, 0.3])
-    assert s["obstacle_collision"] and s["collided"]
+    assert s["obstacle_collision"] and s["collided"] and s["collisions"] == 3
+    assert s["contact_time_s"] == pytest.approx(0.15 + 0.1)  # walls are not obstacles
+    assert s["pair_time_in_range_s"] == pytest.approx(5 * 0.3)
 
 
 # --------------------------------------------------------------------------- closed loop
