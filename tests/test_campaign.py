@@ -259,13 +259,21 @@ def test_that_the_cli_reruns_one_episode_and_writes_json(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_that_chance_constrained_methods_keep_their_promise_in_a_real_campaign():
-    """A real (smaller than ``make campaign``) campaign on every core: no collision for the
-    chance-constrained methods and a per-step collision frequency within the bound."""
-    res = run_campaign("antipodal", range(40), list(METHODS), 1, workers=os.cpu_count(), progress=False)
+    """A real campaign (40 episodes x 4 methods, every core; ``make campaign`` flies 200).
+
+    The promise is conditional on a feasible plan: where the planner failed the companion
+    brakes, and scripted obstacles do not avoid a hovering drone (seed 1, episodes
+    100-139 hold two such ``paper`` episodes at commit 0977553). So: no collision at all
+    for ``hyperplane``; no collision in any episode whose plans never failed for both
+    chance-constrained methods; per-step collision frequency within ``Phi(-r_min)``.
+    """
+    res = run_campaign("antipodal", range(100, 140), list(METHODS), 1, workers=os.cpu_count(), progress=False)
     print(format_table(res))
+    assert res.summary["hyperplane"]["collisions"] == 0
     for m in ("hyperplane", "paper"):
         s = res.summary[m]
         assert s["errors"] == 0
-        assert s["collisions"] == 0, f"{m}: {s['collisions']} collision(s) in {s['episodes']} episodes"
+        hit_while_planning = [r["episode"] for r in res.results if r["method"] == m and r["collided"] and r["failed_plans"] == 0]
+        assert hit_while_planning == [], f"{m}: collision without a planner failure in episodes {hit_while_planning}"
         assert s["pair_step_frequency"] <= s["bound_phi_minus_r_min"]
     assert res.summary["deterministic"]["share_pairs_below_c_min"] > res.summary["hyperplane"]["share_pairs_below_c_min"]
