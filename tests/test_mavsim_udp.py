@@ -149,10 +149,10 @@ def test_that_arming_and_takeoff_work_from_the_ground_over_udp():
     try:
         autopilot_heartbeat(client)
         client.arducopter_arm()
-        assert recv(client, "COMMAND_ACK", 2.0, lambda m: m.command == 400).result == 0
+        assert recv(client, "COMMAND_ACK", 5.0, lambda m: m.command == 400).result == 0
         client.mav.command_long_send(1, 1, 22, 0, 0, 0, 0, float("nan"), 0, 0, float("nan"))
-        assert recv(client, "COMMAND_ACK", 2.0, lambda m: m.command == 22).result == 0
-        recv(client, "HEARTBEAT", 4.0, lambda m: m.get_srcSystem() == 1 and mavutil.mode_string_v10(m) == "LOITER")
+        assert recv(client, "COMMAND_ACK", 5.0, lambda m: m.command == 22).result == 0
+        recv(client, "HEARTBEAT", 8.0, lambda m: m.get_srcSystem() == 1 and mavutil.mode_string_v10(m) == "LOITER")
         assert recv(client, "GLOBAL_POSITION_INT", 1.0).relative_alt == pytest.approx(2500, abs=150)
     finally:
         server.stop()

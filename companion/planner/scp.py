@@ -373,21 +373,23 @@ class Planner:
             self._qps[key] = (layout, qp)
         else:
             qp.update(p_data=data.p_data if first else None, q=data.q_hard, a_data=a_data, l=l, u=u)
-        x0 = None
+        # primal start at the linearisation point (slacks 0)
+        x0 = np.zeros(layout.n)
+        x0[layout.col["V"].slice] = v_bar.ravel()
+        x0[layout.col["p"].slice] = p_bar.ravel()
+        if layout.paper:
+            x0[layout.col["lam"].slice] = lam_bar.ravel()
         if first:
-            x0 = np.zeros(layout.n)
-            x0[layout.col["V"].slice] = v_bar.ravel()
-            x0[layout.col["p"].slice] = p_bar.ravel()
-            if layout.paper:
-                x0[layout.col["lam"].slice] = lam_bar.ravel()
             # duals of the previous replan shifted by one step like the primal (None: cold)
             qp.warm_start(x=x0, y=data.y_warm)
         sol = qp.solve()
         if not sol.accurate:
             u[slack_rows] = np.inf
             qp.update(q=data.q, l=l, u=u)     # l and u together: OSQP 1.1 rejects a lone u against its scaled l on equality rows
-            if x0 is not None:
-                qp.warm_start(x=x0)
+            # The hard solve's duals are no start for the soft problem (an infeasible or
+            # unconverged hard QP leaves them diverging): restart them at zero. Keeping them
+            # made OSQP hit its iteration cap in closed loop with `paper` (measured).
+            qp.warm_start(x=x0, y=np.zeros(layout.m))
             hard_status = sol.status
             sol = qp.solve()
             logger.debug("hard QP %s; soft QP %s", hard_status, sol.status)
