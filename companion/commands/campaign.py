@@ -16,31 +16,12 @@ import json
 import logging
 from pathlib import Path
 
+from companion.commands._argtypes import integer_at_least, open_unit_interval, positive_seconds
 from companion.campaign import DEFAULT_DURATION_S, FAMILIES, METHODS, format_table, run_campaign
 
 logger = logging.getLogger(__name__)
 
 QUIET_LOGGERS = ("mavsim", "estimator", "companion.app", "companion.planner", "companion.offboard", "companion.link")
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
-    return value
-
-
-def _nonnegative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
-    return value
 
 
 def _methods(text: str) -> list[str]:
@@ -53,40 +34,20 @@ def _methods(text: str) -> list[str]:
     return names
 
 
-def _probability(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not 0.0 < value < 1.0:
-        raise argparse.ArgumentTypeError(f"must lie in the open interval (0, 1), got {text}")
-    return value
-
-
-def _duration(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not value > 0.0:
-        raise argparse.ArgumentTypeError(f"must be > 0 s, got {text}")
-    return value
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``campaign`` subcommand."""
     p = subparsers.add_parser("campaign", help="Monte Carlo safety campaign: randomised encounters, per method",
                               description=__doc__.split("\n\n")[1], formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--family", choices=FAMILIES, default="antipodal", help="kind of encounter")
-    p.add_argument("--episodes", type=_positive_int, default=20, help="number of episodes (indices 0..N-1)")
+    p.add_argument("--episodes", type=integer_at_least(1), default=20, help="number of episodes (indices 0..N-1)")
     p.add_argument("--methods", type=_methods, default=list(METHODS), help="comma-separated planner formulations",
                    metavar=",".join(METHODS))
     p.add_argument("--seed", type=int, default=0, help="campaign seed (episode i uses default_rng([seed, i]))")
-    p.add_argument("--workers", type=_positive_int, default=None, help="worker processes (default: CPU count)")
-    p.add_argument("--episode", type=_nonnegative_int, default=None, metavar="I",
+    p.add_argument("--workers", type=integer_at_least(1), default=None, help="worker processes (default: CPU count)")
+    p.add_argument("--episode", type=integer_at_least(0), default=None, metavar="I",
                    help="run only episode I of this campaign (reproduce one encounter)")
-    p.add_argument("--c-min", type=_probability, default=0.90, help="contour of touch that may not be crossed")
-    p.add_argument("--duration", type=_duration, default=DEFAULT_DURATION_S, help="simulated seconds per episode")
+    p.add_argument("--c-min", type=open_unit_interval, default=0.90, help="contour of touch that may not be crossed")
+    p.add_argument("--duration", type=positive_seconds, default=DEFAULT_DURATION_S, help="simulated seconds per episode")
     p.add_argument("--json", metavar="FILE", help="write the summary and per-episode rows as JSON")
     p.add_argument("--plot", metavar="DIR", help="draw the campaign figures (PNG) into DIR")
     p.set_defaults(func=run)

@@ -14,6 +14,7 @@ import logging
 
 import numpy as np
 
+from companion.commands._argtypes import integer_at_least, open_unit_interval
 from companion.errors import InputError
 from companion.overlap import (
     bhattacharyya,
@@ -36,34 +37,13 @@ BHATTACHARYYA_PAIRS = (
 )
 
 
-def _probability(text: str) -> float:
-    """argparse type: a float in the open interval (0, 1)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not 0.0 < value < 1.0:
-        raise argparse.ArgumentTypeError(f"must lie in the open interval (0, 1), got {text}")
-    return value
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
-    return value
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``overlap`` and ``overlap-table`` subcommands."""
     p = subparsers.add_parser("overlap", help="touch radius and overlap for a contour of touch (or the inverse)")
-    p.add_argument("--dim", type=_positive_int, default=3, help="dimension of the Gaussians (default 3)")
+    p.add_argument("--dim", type=integer_at_least(1), default=3, help="dimension of the Gaussians (default 3)")
     which = p.add_mutually_exclusive_group(required=True)
-    which.add_argument("--confidence", type=_probability, help="contour of touch c in (0, 1)")
-    which.add_argument("--overlap", type=_probability, help="overlap Y in (0, 1); prints the contour of touch")
+    which.add_argument("--confidence", type=open_unit_interval, help="contour of touch c in (0, 1)")
+    which.add_argument("--overlap", type=open_unit_interval, help="overlap Y in (0, 1); prints the contour of touch")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.set_defaults(func=run_overlap)
 
