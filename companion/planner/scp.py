@@ -3,7 +3,8 @@
 Each SCP iteration linearises the collision rows around the current iterate
 (:mod:`companion.planner.formulations`), writes them into the fixed QP pattern
 (:mod:`companion.planner.qp_layout`), updates OSQP in place and solves. It stops when the
-cost changes by less than ``scp_tolerance`` (relative), or the iterate no longer moves,
+cost changes by less than ``scp_tolerance`` (relative; ``scp_tolerance_warm`` for a
+replan warm-started from the previous plan), or the iterate no longer moves,
 *and* the exact recheck on the new iterate passes; or at the iteration cap.
 
 Cost (``0.5 x'Px + q'x + const``)::
@@ -224,6 +225,7 @@ class Planner:
         j_prev = np.inf
         iterations = 0
         converged = False
+        tolerance = cfg.scp_tolerance if warm_start is None else cfg.scp_tolerance_warm
         for iterations in range(1, cfg.scp_max_iterations + 1):
             new = self._qp_step(layout, data, request, v_bar, p_bar, lam_bar, first=iterations == 1)
             if not new.solution.usable:
@@ -237,7 +239,7 @@ class Planner:
             lam_bar = step.lam if cfg.formulation == "paper" else None
             # convergence on the cost without penalties: slacks at OSQP's tolerance times the
             # large penalty would add noise of order eps * rho to J
-            small = moved <= STEP_TOL_MPS or abs(step.cost - j_prev) <= cfg.scp_tolerance * max(1.0, abs(step.cost))
+            small = moved <= STEP_TOL_MPS or abs(step.cost - j_prev) <= tolerance * max(1.0, abs(step.cost))
             j_prev = step.cost
             if small and self._recheck(request, data, step.positions)[1]:
                 converged = True
