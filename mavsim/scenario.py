@@ -229,7 +229,8 @@ class _Section:
             raise self.err(key, f"must be a string, got {v!r}")
         return v
 
-    def vector3(self, key: str, default: Any = None) -> np.ndarray:
+    def _array(self, key: str, default: Any, shape: tuple[int, ...], what: str, finite_what: str) -> np.ndarray:
+        """A finite array of ``shape`` (named ``what`` / ``finite_what`` in errors), or ``default`` when absent."""
         if key not in self.table:
             if default is None:
                 raise self.err(key, "missing")
@@ -237,22 +238,18 @@ class _Section:
         try:
             a = np.array(self.table[key], dtype=float)
         except (TypeError, ValueError) as exc:
-            raise self.err(key, f"must be 3 numbers: {exc}") from None
-        if a.shape != (3,) or not np.all(np.isfinite(a)):
-            raise self.err(key, f"must be 3 finite numbers, got {self.table[key]!r}")
+            raise self.err(key, f"must be {what}: {exc}") from None
+        if a.shape != shape or not np.all(np.isfinite(a)):
+            raise self.err(key, f"must be {finite_what}, got {self.table[key]!r}")
         return a
 
+    def vector3(self, key: str, default: Any = None) -> np.ndarray:
+        return self._array(key, default, (3,), "3 numbers", "3 finite numbers")
+
     def covariance(self, key: str, default: Any = None) -> np.ndarray:
+        a = self._array(key, default, (3, 3), "a 3x3 matrix", "a finite 3x3 matrix")
         if key not in self.table:
-            if default is None:
-                raise self.err(key, "missing")
-            return np.array(default, dtype=float)
-        try:
-            a = np.array(self.table[key], dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise self.err(key, f"must be a 3x3 matrix: {exc}") from None
-        if a.shape != (3, 3) or not np.all(np.isfinite(a)):
-            raise self.err(key, f"must be a finite 3x3 matrix, got {self.table[key]!r}")
+            return a
         if not np.allclose(a, a.T, atol=1e-12):
             raise self.err(key, "must be symmetric")
         if np.linalg.eigvalsh(a).min() < -1e-12:
