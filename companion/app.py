@@ -77,7 +77,6 @@ class CompanionState:
     stale_events: int = 0
     failed_plans: int = 0
     slack_plans: int = 0
-    replans: int = 0
     obstacle_rejections: int = 0
     drone_rejections: int = 0
     messages_rejected: int = 0
@@ -103,13 +102,9 @@ class Companion:
         self.drone = DroneFilter(scenario.drone_filter)
         self.tracker = ObstacleTracker(scenario.tracker)
         lp = scenario.loop
-        self.sequencer = OffboardSequencer(
-            offboard
-            or OffboardConfig(prestream_s=lp.prestream_s, retry_period_s=lp.retry_period_s, max_retries=lp.max_retries, reengage=lp.reengage)
-        )
+        self.sequencer = OffboardSequencer(offboard or lp.offboard_config())
         self.state = CompanionState()
         self.records: list[ReplanRecord] = []
-        self.autopilot: tuple[int, int] | None = None
         self._uses_odometry = False
         self._offsets: deque[tuple[float, float]] = deque(maxlen=64)
         self._plan: Plan | None = None
@@ -123,6 +118,11 @@ class Companion:
         self._statics = scenario.static_obstacles
         self._ignored_keys: set[tuple[int, int]] = set()
         self._reported_cov: np.ndarray | None = None  # the autopilot's own position covariance (ODOMETRY), m^2
+
+    @property
+    def autopilot(self) -> tuple[int, int] | None:
+        """(system, component) of the PX4 autopilot the companion follows (the first one heard)."""
+        return self.sequencer.target
 
     # ------------------------------------------------------------------ inbound
 
@@ -142,11 +142,10 @@ class Companion:
                 self.state.obstacle_rejections += 1
             return
         if isinstance(decoded, messages.VehicleHeartbeat):
-            if decoded.is_autopilot and (self.autopilot is None or decoded.key == self.autopilot):
-                if self.autopilot is None:
-                    logger.info("autopilot found: system %d component %d", *decoded.key)
-                self.autopilot = decoded.key
-                self.sequencer.on_heartbeat(rx.t_s, decoded)
+            known = self.autopilot
+            self.sequencer.on_heartbeat(rx.t_s, decoded)  # follows the first PX4 autopilot, ignores the rest
+            if known is None and self.autopilot is not None:
+                logger.info("autopilot found: system %d component %d", *self.autopilot)
             return
         if isinstance(decoded, messages.CommandAck):
             if decoded.key == self.autopilot:
@@ -337,7 +336,6 @@ class Companion:
         )
         plan = self.planner.solve(request, warm_start=self._plan)
         self._last_replan_t = t_s
-        self.state.replans += 1
         realised = {}
         if keys:
             ct = contour_of_touch(

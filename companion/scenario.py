@@ -19,6 +19,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from companion.errors import ConfigError
+from companion.offboard import OffboardConfig
 from companion.planner.config import PlannerConfig
 from estimator import DroneFilterConfig, EstimatorConfigError, TrackerConfig
 
@@ -118,6 +119,11 @@ class LoopConfig:
     retry_period_s: float = 1.0
     max_retries: int = 5
     reengage: bool = False
+
+    def offboard_config(self, **overrides: object) -> OffboardConfig:
+        """The engagement settings of this loop, with ``overrides`` (e.g. ``arm``, ``takeoff_alt_m``)."""
+        base = dict(prestream_s=self.prestream_s, retry_period_s=self.retry_period_s, max_retries=self.max_retries, reengage=self.reengage)
+        return OffboardConfig(**{**base, **overrides})
 
     def __post_init__(self) -> None:
         if not self.setpoint_rate_hz >= 10.0:
