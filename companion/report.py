@@ -50,26 +50,28 @@ def companion_report(companion: Companion) -> dict:
     }
 
 
+def truth_report(truth: dict) -> dict:
+    """The simulator's ground truth in report form: collisions, distances (m), goal, final mode."""
+    dist = truth.get("min_distance_m", {}) or {}
+    clear = truth.get("min_clearance_m", {}) or {}
+    walls = truth.get("min_wall_clearance_m") or []
+    return {
+        "scenario": truth.get("scenario"),
+        "collided": bool(truth.get("collided")),
+        "collisions": len(truth.get("collisions", [])),
+        "goal_reached": bool(truth.get("goal_reached")),
+        "time_to_goal_s": truth.get("time_to_goal_s"),
+        "min_true_distance_m": min(dist.values()) if dist else None,
+        "min_true_clearance_m": min(clear.values()) if clear else None,
+        "min_wall_clearance_m": min(walls) if walls else None,
+        "final_mode": truth.get("final_mode"),
+        "sim_time_s": truth.get("sim_time_s"),
+    }
+
+
 def run_report(companion: Companion, truth: dict | None) -> dict:
-    """Companion report plus the simulator's ground truth (collisions, distances, goal)."""
-    report = companion_report(companion)
-    if truth:
-        dist = truth.get("min_distance_m", {}) or {}
-        clear = truth.get("min_clearance_m", {}) or {}
-        report = {
-            "scenario": truth.get("scenario"),
-            "collided": bool(truth.get("collided")),
-            "collisions": len(truth.get("collisions", [])),
-            "goal_reached": bool(truth.get("goal_reached")),
-            "time_to_goal_s": truth.get("time_to_goal_s"),
-            "min_true_distance_m": min(dist.values()) if dist else None,
-            "min_true_clearance_m": min(clear.values()) if clear else None,
-            "min_wall_clearance_m": min(truth.get("min_wall_clearance_m") or [math.inf]) if truth.get("min_wall_clearance_m") else None,
-            "final_mode": truth.get("final_mode"),
-            "sim_time_s": truth.get("sim_time_s"),
-            **report,
-        }
-    return report
+    """Companion report plus the simulator's ground truth (collisions, distances, goal), if any."""
+    return {**(truth_report(truth) if truth else {}), **companion_report(companion)}
 
 
 def _fmt(value: object) -> str:

@@ -8,12 +8,11 @@ import signal
 import socket
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 from companion.errors import ConfigError
-from companion.report import format_report
+from companion.report import format_report, truth_report
 
 SCENARIOS = ("antipodal", "corridor", "single_obstacle")
 _REPO_CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -105,19 +104,22 @@ def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out
 
 def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None) -> dict:
     api_port, gcs_port, api_local, gcs_local = (_free_udp_port() for _ in range(4))
-    tmp = Path(tempfile.mkdtemp(prefix="companion-demo-"))
-    out_dir = out or tmp
     sim_cmd = [
         sys.executable, "-m", "mavsim.cli", "--scenario", str(scenario), "--seed", str(args.seed),
         "--api-port", str(api_port), "--gcs-port", str(gcs_port), "--api-local-port", str(api_local),
-        "--gcs-local-port", str(gcs_local), "--speed", str(args.speed), "--json", "--tlog", str(out_dir / "mavsim.tlog"),
+        "--gcs-local-port", str(gcs_local), "--speed", str(args.speed), "--json",
     ]
     fly_cmd = [
         sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{api_port}", "--scenario", str(scenario),
-        "--exit-after-goal", "1.0", "--json", "--tlog", str(out_dir / "companion.tlog"),
+        "--exit-after-goal", "1.0", "--json",
     ]
+    if out is not None:
+        sim_cmd += ["--tlog", str(out / "mavsim.tlog")]
+        fly_cmd += ["--tlog", str(out / "companion.tlog")]
     if overrides.get("formulation"):
         fly_cmd += ["--formulation", overrides["formulation"]]
+    if "c_max" in overrides:
+        fly_cmd += ["--no-c-max"]
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         fly = subprocess.run(fly_cmd, capture_output=True, text=True, timeout=300)
@@ -133,14 +135,8 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
         truth = json.loads(sim_out[sim_out.index("{"):]) if "{" in sim_out else {}
     except json.JSONDecodeError:
         truth = {}
-    summary = {
-        "mode": "realtime",
-        "collided": truth.get("collided"),
-        "goal_reached": truth.get("goal_reached"),
-        "time_to_goal_s": truth.get("time_to_goal_s"),
-        "min_true_distance_m": min((truth.get("min_distance_m") or {"-": None}).values(), default=None),
-        **summary,
-    }
+    # No truth (mavsim failed to report): its keys stay out rather than read "no collision".
+    summary = {"mode": "realtime", **(truth_report(truth) if truth else {}), **summary}
     if out is not None:
         (out / "truth.json").write_text(json.dumps(truth, indent=2, default=str))
     return summary

@@ -10,7 +10,6 @@ import time
 
 from companion.app import Companion
 from companion.link import DEFAULT_URL, open_link
-from companion.offboard import OffboardConfig
 from companion.realtime import run_realtime
 from companion.report import companion_report, format_report
 from companion.scenario import load_scenario
@@ -25,8 +24,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Connect to a PX4 autopilot, stream velocity setpoints, request OFFBOARD (confirmed from the "
             "HEARTBEAT) and fly the scenario's mission around the obstacles heard on the link. Without "
-            "--arm the companion waits for the pilot to arm and hands over only when asked to by the "
-            "OFFBOARD request it makes after streaming."
+            "--arm the companion does not arm: it waits for the pilot to arm, then streams setpoints and "
+            "requests OFFBOARD. If the vehicle leaves OFFBOARD, the companion stops commanding."
         ),
     )
     p.add_argument("--connect", default=DEFAULT_URL, help=f"pymavlink connection string (default {DEFAULT_URL})")
@@ -35,6 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--takeoff-alt", type=float, default=None, metavar="M", help="take off to M metres above home first")
     p.add_argument("--reengage", action="store_true", help="re-request OFFBOARD after the pilot took over (default: never)")
     p.add_argument("--formulation", default=None, help="planner formulation (overrides the scenario)")
+    p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--tlog", default=None, help="record the link to this tlog")
     p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S wall seconds")
     p.add_argument("--exit-after-goal", type=float, default=None, metavar="S", help="stop S seconds after the goal is reached")
@@ -49,16 +49,12 @@ def microsecond_clock() -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    overrides = {"formulation": args.formulation} if args.formulation else {}
+    overrides: dict = {"formulation": args.formulation} if args.formulation else {}
+    if args.no_c_max:
+        overrides["c_max"] = None
     scenario = load_scenario(args.scenario, **overrides)
-    lp = scenario.loop
-    offboard = OffboardConfig(
-        prestream_s=lp.prestream_s,
-        retry_period_s=lp.retry_period_s,
-        max_retries=lp.max_retries,
-        reengage=args.reengage or lp.reengage,
-        arm=args.arm,
-        takeoff_alt_m=args.takeoff_alt,
+    offboard = scenario.loop.offboard_config(
+        arm=args.arm, takeoff_alt_m=args.takeoff_alt, reengage=args.reengage or scenario.loop.reengage
     )
     companion = Companion(scenario, offboard=offboard)
 
