@@ -258,7 +258,9 @@ class Commander:
         elif self.mode == "AUTO.TAKEOFF":
             v = POS_GAIN_PER_S * (self.hold_point - p)
             err = self.takeoff_z - p[2]
-            v[2] = max(-self.params["MPC_TKO_SPEED"], min(0.0, 2.0 * err))
+            # MPC_Z_P like the hold: with the vehicle's 0.3 s velocity lag this approach is
+            # nearly critically damped (a gain of 2/s overshot the target altitude by ~0.15 m)
+            v[2] = max(-self.params["MPC_TKO_SPEED"], min(0.0, POS_GAIN_PER_S * err))
             if err > -0.05:
                 self._say(SEV_INFO, "Takeoff complete")
                 self._enter("AUTO.LOITER", vehicle, now_s)
