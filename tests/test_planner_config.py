@@ -37,6 +37,8 @@ def test_that_defaults_are_valid_and_frozen():
         ({"slack_penalty": 0}, r"slack_penalty = 0 must be positive"),
         ({"scp_max_iterations": 0}, r"scp_max_iterations = 0 must be >= 1"),
         ({"solver_polish": "yes"}, r"solver_polish = 'yes' must be true or false"),
+        ({"solver_rho": 0.0}, r"solver_rho = 0.0 must be positive"),
+        ({"solver_max_iter": 0}, r"solver_max_iter = 0 must be >= 1"),
     ],
 )
 def test_that_bad_values_get_clear_errors(kwargs, match):

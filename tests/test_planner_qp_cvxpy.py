@@ -16,17 +16,19 @@ import pytest
 from companion import overlap
 from companion.planner import Planner, PlannerConfig, PlanRequest
 from companion.planner.formulations import BACKOFF_SIGMA, LAM_EPS
+from companion.planner.scp import LEAST_VIOLATION_MARGIN
 
 N = 12
 TAU = 0.5
 
 
-def _case(formulation: str) -> tuple[PlannerConfig, PlanRequest, np.ndarray]:
+def _case(formulation: str, trust_region_mps: float = 1.5) -> tuple[PlannerConfig, PlanRequest, np.ndarray]:
     cfg = PlannerConfig(formulation=formulation, horizon_steps=N, step_s=TAU, c_min=0.9, c_max=0.99,
                         velocity_max_mps=(2.0, 2.0, 1.0), accel_max_mps2=(1.0, 1.0, 0.5), drone_radius_m=0.3,
                         sensing_range_m=15.0, weight_jerk=0.2, weight_velocity=0.05, weight_progress=0.4,
-                        trust_region_mps=0.8,
-                        solver_eps=1e-7, solver_eps_rel=1e-7)   # compare models, not tolerances
+                        trust_region_mps=trust_region_mps,
+                        solver_eps=1e-7, solver_eps_rel=1e-7,    # compare models, not tolerances
+                        solver_max_iter=10000)
     t = np.arange(1, N + 1)[:, None] * TAU
     s_d = np.array([[0.03, 0.01, 0.0], [0.01, 0.02, 0.0], [0.0, 0.0, 0.02]])
     drone_covs = np.stack([s_d * (1.0 + 0.05 * i) for i in range(N)])
@@ -43,8 +45,13 @@ def _case(formulation: str) -> tuple[PlannerConfig, PlanRequest, np.ndarray]:
     return cfg, req, v_bar
 
 
-def _cvxpy_qp(cfg: PlannerConfig, req: PlanRequest, v_bar: np.ndarray, rows, lam_bar=None):
-    """The QP written plainly: returns (objective, V)."""
+def _cvxpy_qp(cfg: PlannerConfig, req: PlanRequest, v_bar: np.ndarray, rows, lam_bar=None, safety="hard"):
+    """The QP written plainly: returns (objective, V, total safety slack).
+
+    ``safety = "hard"``: the safety slacks are held at zero (the QP the planner solves
+    first; only the ``c_max`` slack is free). ``"least"``: lexicographically, the least
+    total safety slack, then the least cost with no more slack than that.
+    """
     P = req.num_obstacles
     r_min = overlap.touch_radius(cfg.c_min, 3)
     in_range = np.linalg.norm(req.obstacle_means[:, 0] - req.position, axis=1) <= cfg.sensing_range_m
@@ -88,10 +95,18 @@ def _cvxpy_qp(cfg: PlannerConfig, req: PlanRequest, v_bar: np.ndarray, rows, lam
             + cfg.slack_penalty * (cp.sum(s[in_range]) + cp.sum(s_w)) + cfg.c_max_penalty * cp.sum(s_hi[in_range]))
     if e is not None:
         cost = cost + cfg.slack_penalty * cp.sum(cp.abs(e[in_range]))
+    total = cp.sum(s[in_range]) + cp.sum(s_w) + (cp.sum(cp.abs(e[in_range])) if e is not None else 0.0)
+    if safety == "hard":
+        cons += [total <= 0.0]
+    elif safety == "least":
+        least = cp.Problem(cp.Minimize(total), cons)
+        least.solve(solver=cp.CLARABEL)
+        assert least.status == "optimal" and least.value > 1e-3
+        cons += [total <= least.value + 1e-7]
     prob = cp.Problem(cp.Minimize(cost), cons)
     prob.solve(solver=cp.CLARABEL)
     assert prob.status == "optimal"
-    return prob.value, V.value
+    return prob.value, V.value, float(total.value)
 
 
 def test_that_the_hyperplane_rows_are_the_minmax_support_rows():
@@ -110,20 +125,56 @@ def test_that_the_hyperplane_rows_are_the_minmax_support_rows():
     np.testing.assert_allclose(rows.upper, r_max * (res.s1 + res.s2) + radius - n_o, atol=1e-9)
 
 
+def _paper_lam(req: PlanRequest, v_bar: np.ndarray) -> np.ndarray:
+    p_bar = req.position + TAU * np.cumsum(v_bar, axis=0)
+    res = overlap.minmax(p_bar[None], req.drone_covs[None], req.obstacle_means, req.obstacle_covs)
+    return np.clip(res.lam, LAM_EPS, 1 - LAM_EPS)
+
+
+def _safety_slack_total(planner: Planner, step) -> float:
+    """Total safety slack of a QP step (in-range obstacle rows, walls, admissibility)."""
+    layout = planner._qps[(N, 3, 1)][0]
+    total = step.slack_obstacle[:2].sum() + step.slack_wall.sum()
+    if layout.paper:
+        total += np.abs(step.solution.x[layout.col["e_pos"].slice]).sum()
+        total += np.abs(step.solution.x[layout.col["e_neg"].slice]).sum()
+    return float(total)
+
+
 @pytest.mark.parametrize("formulation", ["hyperplane", "paper", "bhattacharyya"])
 def test_that_one_qp_matches_an_independent_cvxpy_model(formulation):
     cfg, req, v_bar = _case(formulation)
     planner = Planner(cfg)
     step = planner.qp_step(req, v_bar)
     assert step.solution.accurate
+    assert _safety_slack_total(planner, step) < 1e-6       # the safety rows hold in this linearisation...
+    if formulation != "bhattacharyya":                      # (a baseline without c_max)
+        assert step.slack_upper.max() > 0.1                # ...and c_max (0.99) cannot, it is soft
     p_bar = req.position + TAU * np.cumsum(v_bar, axis=0)
-    lam_bar = None
-    if formulation == "paper":
-        res = overlap.minmax(p_bar[None], req.drone_covs[None], req.obstacle_means, req.obstacle_covs)
-        lam_bar = np.clip(res.lam, LAM_EPS, 1 - LAM_EPS)
+    lam_bar = _paper_lam(req, v_bar) if formulation == "paper" else None
     rows = planner.linearise(req, p_bar, lam_bar)
-    value, v_ref = _cvxpy_qp(cfg, req, v_bar, rows, lam_bar)
+    value, v_ref, _ = _cvxpy_qp(cfg, req, v_bar, rows, lam_bar)
     assert step.objective == pytest.approx(value, rel=2e-4, abs=2e-4)
     np.testing.assert_allclose(step.velocities, v_ref, atol=5e-3)
     # the cost the planner reports is the cost written out
     np.testing.assert_allclose(step.positions, req.position + TAU * np.cumsum(step.velocities, axis=0), atol=1e-6)
+
+
+def test_that_a_qp_whose_safety_rows_cannot_hold_gives_up_the_least_slack():
+    """``paper`` with a tight velocity trust region: the linearised rows cannot all hold.
+
+    The planner's QP must use (within its margin) the least total safety slack cvxpy
+    finds, not the 4x more a single L1-penalised QP trades for cost.
+    """
+    cfg, req, v_bar = _case("paper", trust_region_mps=0.8)
+    planner = Planner(cfg)
+    step = planner.qp_step(req, v_bar)
+    assert step.solution.usable
+    lam_bar = _paper_lam(req, v_bar)
+    rows = planner.linearise(req, req.position + TAU * np.cumsum(v_bar, axis=0), lam_bar)
+    _, _, least = _cvxpy_qp(cfg, req, v_bar, rows, lam_bar, safety="least")
+    _, _, penalised = _cvxpy_qp(cfg, req, v_bar, rows, lam_bar, safety="soft")
+    used = _safety_slack_total(planner, step)
+    violated = int(np.sum(step.slack_obstacle[:2] > 1e-4))
+    assert least - 1e-3 <= used <= least + LEAST_VIOLATION_MARGIN * violated + 1e-3, (used, least, violated)
+    assert penalised > 2.0 * least                         # what the penalty alone would have given up

@@ -148,3 +148,22 @@ def test_that_the_plan_solve_time_is_a_diagnostic_only():
     a, b = Planner(cfg).solve(req), Planner(cfg).solve(req)
     np.testing.assert_array_equal(a.velocities, b.velocities)   # deterministic, whatever the clock says
     assert a.solve_time_s > 0.0
+
+
+@pytest.mark.parametrize("formulation", ["hyperplane", "paper"])
+def test_that_a_cold_plan_does_not_depend_on_what_the_planner_solved_before(formulation):
+    """A plan without warm start is a function of its request: OSQP's duals restart at zero and
+    its step size ``rho`` at ``solver_rho``, whatever the previous solves left behind."""
+    cfg, req = scenario_one(formulation)
+    fresh = Planner(cfg).solve(req)
+    used = Planner(cfg)
+    _, other = scenario_one(formulation)
+    other = PlanRequest(position=START + np.array([0.0, 1.5, 0.5]), velocity=np.array([1.0, -0.5, 0.0]),
+                        drone_covs=other.drone_covs, target=GOAL + np.array([0.0, -3.0, 0.0]),
+                        obstacle_means=other.obstacle_means + np.array([0.0, 0.3, 0.0]),
+                        obstacle_covs=other.obstacle_covs, obstacle_radii=other.obstacle_radii)
+    previous = used.solve(other)
+    used.solve(other, warm_start=previous)
+    again = used.solve(req)
+    np.testing.assert_array_equal(again.velocities, fresh.velocities)
+    assert again.iterations == fresh.iterations

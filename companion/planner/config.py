@@ -107,6 +107,11 @@ class PlannerConfig:
     accel_max_mps2 : (3,) floats
         Per-axis acceleration bound, m/s^2: ``|V_i - V_{i-1}| <= a_max * tau``
         (``V_0`` is the current velocity).
+    velocity_time_constant_s : float
+        Time constant ``T`` of the vehicle's first-order velocity response to a velocity
+        setpoint, seconds (:mod:`companion.planner.vehicle_model`). 0 (default) is the
+        paper's model: the velocity follows the command at once. With ``T > 0`` the plan's
+        velocities are the vehicle's and the streamed commands lead them.
     drone_radius_m : float
         Physical radius of the drone, metres.
     sensing_range_m : float
@@ -155,6 +160,15 @@ class PlannerConfig:
         covers the primal tolerance, so returned plans meet ``c_min`` exactly.
     solver_polish : bool
         Whether OSQP polishes its solution (active-set refinement).
+    solver_max_iter : int
+        ADMM iterations allowed to the hard QP and to each least-violation QP before the
+        planner moves on (the last-resort soft QP gets 10,000). Unscaled OSQP took 10,000
+        iterations without declaring an infeasible hard QP infeasible (measured in closed
+        loop); warm-started hard QPs that solve need a few hundred, cold ones about a
+        thousand (planner benchmark). Tighter ``solver_eps`` needs more.
+    solver_rho : float
+        OSQP's initial ADMM step size, restored before every QP of the SCP (see
+        :mod:`companion.planner.osqp_qp`).
     """
 
     formulation: str = "hyperplane"
@@ -165,6 +179,7 @@ class PlannerConfig:
     c_max: float | None = None
     velocity_max_mps: tuple[float, float, float] = (3.0, 3.0, 1.0)
     accel_max_mps2: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    velocity_time_constant_s: float = 0.0
     drone_radius_m: float = 0.5
     sensing_range_m: float = 10.0
     weight_terminal: float = 1.0
@@ -181,6 +196,8 @@ class PlannerConfig:
     solver_eps: float = 1e-4
     solver_eps_rel: float = 1e-4
     solver_polish: bool = False
+    solver_max_iter: int = 2000
+    solver_rho: float = 0.1
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -196,6 +213,7 @@ class PlannerConfig:
                 raise ConfigError(f"c_max = {self.c_max!r} must be greater than c_min = {self.c_min!r}")
         set_("velocity_max_mps", _axis_vector("velocity_max_mps", self.velocity_max_mps))
         set_("accel_max_mps2", _axis_vector("accel_max_mps2", self.accel_max_mps2))
+        set_("velocity_time_constant_s", _nonnegative("velocity_time_constant_s", self.velocity_time_constant_s))
         set_("drone_radius_m", _nonnegative("drone_radius_m", self.drone_radius_m))
         set_("sensing_range_m", _positive("sensing_range_m", self.sensing_range_m, allow_inf=True))
         set_("weight_terminal", _positive("weight_terminal", self.weight_terminal))
@@ -211,6 +229,8 @@ class PlannerConfig:
         set_("trust_region_lam", _positive("trust_region_lam", self.trust_region_lam))
         set_("solver_eps", _positive("solver_eps", self.solver_eps))
         set_("solver_eps_rel", _nonnegative("solver_eps_rel", self.solver_eps_rel))
+        set_("solver_max_iter", _int_at_least("solver_max_iter", self.solver_max_iter, 1))
+        set_("solver_rho", _positive("solver_rho", self.solver_rho))
         if not isinstance(self.solver_polish, bool):
             raise ConfigError(f"solver_polish = {self.solver_polish!r} must be true or false")
 

@@ -24,6 +24,15 @@ evaluated around the SCP iterate ``p_bar`` (and ``lam_bar`` for ``paper``). Arra
   covariances ``D_B = eta^2 / 2``). Radii enter by shrinking the mean separation by ``R``
   along the line of centres (:func:`signed_bhattacharyya`).
 
+Row scaling: OSQP runs without its own equilibration (:mod:`companion.planner.osqp_qp`),
+so the rows are written with gradients of order one. ``hyperplane`` and ``deterministic``
+rows have unit normals already; ``bhattacharyya`` rows are divided by ``sqrt(q)`` (metres
+of separation) and each ``paper`` row (``h`` bounds and admissibility) by the norm of its
+gradient in ``(p_i, lam)``. The feasible set is the same; slacks are in those units.
+Unscaled, the ``paper`` cold start of the planner benchmark ran OSQP to its iteration
+cap on an infeasible first QP (OSQP did not detect the infeasibility): 240 ms; with
+unit rows it is detected in 600 iterations, 49 ms.
+
 Obstacles out of sensing range get ``lower = -inf``, ``upper = +inf`` and zero
 coefficients (the pattern stays the same).
 """
@@ -168,7 +177,8 @@ def bhattacharyya_rows(p_bar, drone_covs, means, covs, radius_sum, r_min):
     f = sep * sq
     grad = -(sq[..., None] * u + (sep / (dist * sq))[..., None] * (s_inv_u - q[..., None] * u))   # w.r.t. p
     lower = target - f + np.einsum("pnk,pnk->pn", grad, mu1)
-    return ObstacleRows(coef_p=grad, lower=lower, upper=np.full_like(lower, np.inf))
+    # divided by sqrt(q) the row is in metres of separation (see "Row scaling" above)
+    return ObstacleRows(coef_p=grad / sq[..., None], lower=lower / sq, upper=np.full_like(lower, np.inf))
 
 
 def paper_rows(p_bar, lam_bar, drone_covs, means, covs, radius_sum, r_min, r_max):
@@ -182,8 +192,16 @@ def paper_rows(p_bar, lam_bar, drone_covs, means, covs, radius_sum, r_min, r_max
     upper = r_max + base if r_max is not None else np.full_like(lower, np.inf)
     # g + g_p.(p - p_bar) + g_lam (lam - lam_bar) = 0
     adm_rhs = np.einsum("pnk,pnk->pn", t.g_grad_mu1, mu1) + t.g_grad_lam * lam_bar - t.g
-    return ObstacleRows(coef_p=t.h_grad_mu1, lower=lower, upper=upper, coef_lam=t.h_grad_lam,
-                        adm_p=t.g_grad_mu1, adm_lam=t.g_grad_lam, adm_rhs=adm_rhs)
+    kh, kg = _inverse_row_norm(t.h_grad_mu1, t.h_grad_lam), _inverse_row_norm(t.g_grad_mu1, t.g_grad_lam)
+    return ObstacleRows(coef_p=t.h_grad_mu1 * kh[..., None], lower=lower * kh, upper=upper * kh,
+                        coef_lam=t.h_grad_lam * kh, adm_p=t.g_grad_mu1 * kg[..., None], adm_lam=t.g_grad_lam * kg,
+                        adm_rhs=adm_rhs * kg)
+
+
+def _inverse_row_norm(coef_p: np.ndarray, coef_lam: np.ndarray) -> np.ndarray:
+    """``1 / |(coef_p, coef_lam)|`` per row, (P, N): the factor that makes a row's gradient unit."""
+    norm = np.sqrt(np.einsum("pnk,pnk->pn", coef_p, coef_p) + coef_lam**2)
+    return 1.0 / np.maximum(norm, _TINY_M)
 
 
 def relax_out_of_range(rows: ObstacleRows, in_range: np.ndarray) -> ObstacleRows:

@@ -3,7 +3,7 @@
 Decision vector ``x`` (blocks in this order; ``i`` step 0..N-1, ``k`` axis, ``j`` obstacle,
 ``w`` wall; row-major within a block)::
 
-    V      (N, 3)   velocity commands, m/s
+    V      (N, 3)   vehicle velocities at the step ends, m/s (the commands without lag)
     p      (N, 3)   positions p_1..p_N, NED metres
     s_lo   (P, N)   safety slack of the obstacle rows (>= 0, L1-penalised)
     s_hi   (P, N)   slack of the c_max side of the obstacle rows (only with c_max)
@@ -14,7 +14,8 @@ Decision vector ``x`` (blocks in this order; ``i`` step 0..N-1, ``k`` axis, ``j`
 
 Constraint rows ``l <= A x <= u``::
 
-    dyn    (N, 3)   p_i - p_{i-1} - tau V_i = 0           (p_0 = current position -> l = u)
+    dyn    (N, 3)   p_i - p_{i-1} - b V_i - c V_{i-1} = 0  (p_0, V_0 current -> l = u; b, c of
+                    :class:`~companion.planner.vehicle_model.LagModel`: b = tau, c = 0 without lag)
     vbox   (N, 3)   V_i in [-v_max, v_max] ∩ trust region around the iterate
     accel  (N, 3)   V_i - V_{i-1} in [-a_max tau, a_max tau]   (V_0 = current velocity)
     obs    (P, N)   c . p_i (+ c_lam lam) + s_lo >= l      (formulation-specific)
@@ -43,6 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+
+from companion.planner.vehicle_model import LagModel
 
 logger = logging.getLogger(__name__)
 
@@ -86,14 +89,17 @@ class QpLayout:
         Whether the obstacle rows carry a ``c_max`` side (``s_hi`` block).
     step_s : float
         ``tau``, seconds (enters the constant ``dyn`` coefficients).
+    lag : LagModel, optional
+        The vehicle's velocity lag (``dyn`` coefficients ``b``, ``c``); default none.
     slack_scale : float
         Coefficient ``1/rho`` of the slack columns in their rows.
     """
 
     def __init__(self, n_steps: int, n_obstacles: int, n_walls: int, *, paper: bool, upper: bool, step_s: float,
-                 slack_scale: float = 1.0) -> None:
+                 lag: LagModel | None = None, slack_scale: float = 1.0) -> None:
         N, P, W = n_steps, n_obstacles, n_walls
         self.N, self.P, self.W, self.paper, self.upper, self.tau = N, P, W, paper, upper, step_s
+        self.lag = lag if lag is not None else LagModel.from_time_constant(step_s, 0.0)
         self.slack_scale = slack_scale
         PN = P * N
         # ---- columns
@@ -108,6 +114,9 @@ class QpLayout:
         self.n = start
         slack_names = ("s_lo", "s_hi", "e_pos", "e_neg", "s_wall")
         self.slack_cols = np.concatenate([np.arange(self.col[s].start, self.col[s].start + self.col[s].size) for s in slack_names])
+        #: the safety slacks (all but ``s_hi``), as positions within ``slack_cols``
+        self.safety_slacks = np.flatnonzero(~np.isin(self.slack_cols, np.arange(self.col["s_hi"].start,
+                                                                                 self.col["s_hi"].start + self.col["s_hi"].size)))
         # ---- rows
         rsizes = [("dyn", 3 * N), ("vbox", 3 * N), ("accel", 3 * N), ("obs", PN), ("obs_hi", PN if upper else 0),
                   ("adm", PN if paper else 0),
@@ -168,11 +177,13 @@ class QpLayout:
 
         e3 = np.arange(3 * N)               # flat (i, k) index
         later = np.arange(3, 3 * N)          # entries with a predecessor step
-        # dyn: p_i - p_{i-1} - tau V_i = 0
+        # dyn: p_i - p_{i-1} - b V_i - c V_{i-1} = 0 (V_0 is data: it goes to the bounds)
         r0 = self.row["dyn"].start
         add(None, r0 + e3, p + e3, 1.0)
         add(None, r0 + later, p + later - 3, -1.0)
-        add(None, r0 + e3, V + e3, -tau)
+        add(None, r0 + e3, V + e3, -self.lag.b)
+        if self.lag.c != 0.0:
+            add(None, r0 + later, V + later - 3, -self.lag.c)
         # vbox: V_i
         add(None, self.row["vbox"].start + e3, V + e3, 1.0)
         # accel: V_i - V_{i-1}

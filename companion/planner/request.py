@@ -166,7 +166,11 @@ class Plan:
     Attributes
     ----------
     velocities : (N, 3) array
-        Velocity commands ``V_1..V_N``, NED m/s, each held ``tau``.
+        Planned vehicle velocities ``V_1..V_N`` at the step ends, NED m/s.
+    commands : (N, 3) array
+        Velocity setpoints ``u_1..u_N`` to stream, each held ``tau``, NED m/s: equal to
+        ``velocities`` without a velocity lag, leading them with one
+        (:mod:`companion.planner.vehicle_model`).
     positions : (N, 3) array
         Planned positions ``p_1..p_N``, NED metres.
     eta : (P, N) array
@@ -189,8 +193,8 @@ class Plan:
         influences the plan.
     slack_max : float
         Largest safety slack in the last QP (units of the violated row: metres for walls
-        and deterministic/hyperplane rows, Mahalanobis radius for ``paper``, nats for
-        ``bhattacharyya``).
+        and the deterministic, hyperplane and bhattacharyya rows; ``paper`` rows are
+        divided by the norm of their gradient, see :mod:`companion.planner.formulations`).
     cost : float
         Objective of the last QP at its solution (terminal + jerk + effort + penalties).
     formulation : str
@@ -212,6 +216,7 @@ class Plan:
     slack_max: float
     cost: float
     formulation: str
+    commands: np.ndarray
     notes: tuple[str, ...] = ()
 
     @property
