@@ -257,7 +257,7 @@ class Companion:
             self.state.mode = "braking"
             return self._brake()
         self.state.mode = "tracking"
-        return np.asarray(self._plan.velocities[max(k, 0)], dtype=float).copy()
+        return np.asarray(self._plan.commands[max(k, 0)], dtype=float).copy()
 
     # ------------------------------------------------------------------ planning
 
@@ -287,6 +287,19 @@ class Companion:
             return False
         along = float(np.dot(obstacle - position, to_goal) / length)
         return 0.0 < along < length
+
+    def _initial_velocity(self, est) -> np.ndarray:
+        """``V_0`` of the plan, NED m/s.
+
+        Without a velocity lag in the planner's model the vehicle is taken to fly the last
+        command (the paper's model; the command is smooth, the estimate noisy). With one
+        (``velocity_time_constant_s > 0``) the plan's velocities are the vehicle's, so
+        ``V_0`` is the estimated vehicle velocity: the lag model then says how the
+        commands must lead it.
+        """
+        if self.cfg.velocity_time_constant_s > 0.0:
+            return np.asarray(est.velocity, dtype=float).copy()
+        return self._command.copy()
 
     def _replan(self, t_s: float, t_v: float, out: list) -> None:
         est = self.drone.state
@@ -324,7 +337,7 @@ class Companion:
         leading = [self._leads_the_way(position, now_pos[k]) for k in keys] + [False] * len(self._statics)
         request = PlanRequest(
             position=position,
-            velocity=self._command.copy(),
+            velocity=self._initial_velocity(est),
             drone_covs=drone_covs,
             target=target,
             obstacle_means=np.array(means).reshape(-1, n, 3),
@@ -381,6 +394,6 @@ class Companion:
                 obstacle_covs=now_cov,
                 target=target,
                 plan_positions=np.asarray(plan.positions).copy(),
-                command=np.asarray(plan.velocities[0]).copy() if plan.status != "failed" else np.zeros(3),
+                command=np.asarray(plan.commands[0]).copy() if plan.status != "failed" else np.zeros(3),
             )
         )
