@@ -71,6 +71,8 @@ MEAS_VAR_RANGE_M2 = (0.005, 0.06)  # eigenvalues of obstacle measurement covaria
 DRONE_VAR_RANGE_M2 = (0.005, 0.04)  # eigenvalues of the drone's position noise
 ANISOTROPIC_SHARE = 0.6
 SENSING_RANGE_M = 10.0
+#: Velocity lag of the simulated vehicle, which the planner models too, seconds.
+VELOCITY_TIME_CONSTANT_S = 0.3
 DEFAULT_DURATION_S = 40.0
 STOP_AFTER_GOAL_S = 0.5
 #: (step, obstacle) pairs whose realised contour of touch is below this are *near*: the
@@ -300,12 +302,13 @@ def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90
             "c_min": float(c_min),
             "velocity_max_mps": [SPEED_MAX_MPS, SPEED_MAX_MPS, 1.0],
             "accel_max_mps2": [0.5, 0.5, 0.5],
+            "velocity_time_constant_s": VELOCITY_TIME_CONSTANT_S,
             "sensing_range_m": SENSING_RANGE_M,
         },
         "estimator": {"drone": {"accel_noise_psd_m2ps3": 0.5}, "tracker": {"accel_noise_psd_m2ps3": 0.01}},
         "companion": {"setpoint_rate_hz": 20.0, "obstacle_radius_m": RADIUS_RANGE_M[1]},
         "sim": {
-            "velocity_time_constant_s": 0.3,
+            "velocity_time_constant_s": VELOCITY_TIME_CONSTANT_S,
             "accel_max_mps2": 4.0,
             "position_noise_cov_m2": drone_noise.tolist(),
             "velocity_noise_cov_m2ps2": (vel_var * np.eye(3)).tolist(),

@@ -18,6 +18,8 @@ Constraint rows ``l <= A x <= u``::
                     :class:`~companion.planner.vehicle_model.LagModel`: b = tau, c = 0 without lag)
     vbox   (N, 3)   V_i in [-v_max, v_max] ∩ trust region around the iterate
     accel  (N, 3)   V_i - V_{i-1} in [-a_max tau, a_max tau]   (V_0 = current velocity)
+    cmd    (N, 3)   V_i - alpha V_{i-1} in (1 - alpha) [-v_max, v_max]: the command u_i within
+                    the speed bound (only with a velocity lag, alpha > 0)
     obs    (P, N)   c . p_i (+ c_lam lam) + s_lo >= l      (formulation-specific)
     obs_hi (P, N)   c . p_i (+ c_lam lam) - s_hi <= u      (the c_max side; only with c_max)
     adm    (P, N)   g_p . p_i + g_lam lam + e_pos - e_neg = rhs    (``paper`` only)
@@ -118,7 +120,8 @@ class QpLayout:
         self.safety_slacks = np.flatnonzero(~np.isin(self.slack_cols, np.arange(self.col["s_hi"].start,
                                                                                  self.col["s_hi"].start + self.col["s_hi"].size)))
         # ---- rows
-        rsizes = [("dyn", 3 * N), ("vbox", 3 * N), ("accel", 3 * N), ("obs", PN), ("obs_hi", PN if upper else 0),
+        lagged = self.lag.alpha > 0.0
+        rsizes = [("dyn", 3 * N), ("vbox", 3 * N), ("accel", 3 * N), ("cmd", 3 * N if lagged else 0), ("obs", PN), ("obs_hi", PN if upper else 0),
                   ("adm", PN if paper else 0),
                   ("lambox", PN if paper else 0), ("wall", W * N), ("slack", self.slack_cols.size)]
         self.row: dict[str, Block] = {}
@@ -143,8 +146,9 @@ class QpLayout:
             return np.concatenate([idx[:, 1:], idx[:, -1:]], axis=1).ravel()
 
         parts = []
-        for name in ("dyn", "vbox", "accel"):
-            parts.append(self.row[name].start + shifted(3 * N, 1, 3))
+        for name in ("dyn", "vbox", "accel", "cmd"):
+            if self.row[name].size:
+                parts.append(self.row[name].start + shifted(3 * N, 1, 3))
         for name in ("obs", "obs_hi", "adm", "lambox"):
             size = self.row[name].size
             parts.append(self.row[name].start + shifted(size, size // N if size else 0, 1))
@@ -190,6 +194,11 @@ class QpLayout:
         r0 = self.row["accel"].start
         add(None, r0 + e3, V + e3, 1.0)
         add(None, r0 + later, V + later - 3, -1.0)
+        # cmd: V_i - alpha V_{i-1} = (1 - alpha) u_i, the command (only with a velocity lag)
+        if self.row["cmd"].size:
+            r0 = self.row["cmd"].start
+            add(None, r0 + e3, V + e3, 1.0)
+            add(None, r0 + later, V + later - 3, -self.lag.alpha)
         # obs: c . p_i (+ c_lam lam) + s_lo >= l ; obs_hi: c . p_i (+ c_lam lam) - s_hi <= u. Two rows,
         # not one row with both slacks: the columns +s_lo and -s_hi of one row are collinear
         # and OSQP left both positive together (measured)

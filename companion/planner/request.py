@@ -171,6 +171,9 @@ class Plan:
         Velocity setpoints ``u_1..u_N`` to stream, each held ``tau``, NED m/s: equal to
         ``velocities`` without a velocity lag, leading them with one
         (:mod:`companion.planner.vehicle_model`).
+    initial_velocity : (3,) array
+        ``V_0``: the vehicle velocity the plan starts from (the request's, clipped to
+        what the bounds can hold), NED m/s.
     positions : (N, 3) array
         Planned positions ``p_1..p_N``, NED metres.
     eta : (P, N) array
@@ -217,6 +220,7 @@ class Plan:
     cost: float
     formulation: str
     commands: np.ndarray
+    initial_velocity: np.ndarray
     notes: tuple[str, ...] = ()
 
     @property

@@ -161,6 +161,13 @@ class _RequestData:
         lo_acc[0] += self.v0
         hi_acc[0] += self.v0
         self.l[layout.row["accel"].slice], self.u[layout.row["accel"].slice] = lo_acc.ravel(), hi_acc.ravel()
+        if layout.row["cmd"].size:          # commands within the speed bound: (1 - a) |u_i| <= (1 - a) v_max
+            alpha = layout.lag.alpha
+            cmd = np.broadcast_to((1.0 - alpha) * vmax, (N, 3)).copy()
+            lo_cmd, hi_cmd = -cmd, cmd.copy()
+            lo_cmd[0] += alpha * self.v0
+            hi_cmd[0] += alpha * self.v0
+            self.l[layout.row["cmd"].slice], self.u[layout.row["cmd"].slice] = lo_cmd.ravel(), hi_cmd.ravel()
         # walls: a.p_i - s <= b - r sqrt(a' S_i a) - R_drone
         r_wall = 0.0 if cfg.formulation == "deterministic" else planner.r_min + F.BACKOFF_SIGMA
         spread = np.sqrt(np.einsum("wk,nkl,wl->wn", request.walls_normal, request.drone_covs, request.walls_normal))
@@ -529,11 +536,13 @@ class Planner:
         else:
             status = "failed"
             notes.append("exact recheck violated c_min without slack")
-        commands = self.lag.commands(data.v0, velocities)
+        # the cmd rows hold |u| <= v_max to OSQP's tolerance, which 1/(1 - alpha) amplifies
+        # (1.5e-4 m/s over, measured): clip so that no setpoint ever exceeds the bound
+        commands = np.clip(self.lag.commands(data.v0, velocities), -cfg.velocity_max, cfg.velocity_max)
         for a in (velocities, positions, commands):
             a.setflags(write=False)
         plan = Plan(
-            velocities=velocities, commands=commands, positions=positions, eta=figs.eta, contour_of_touch=figs.contour_of_touch,
+            velocities=velocities, commands=commands, initial_velocity=data.v0.copy(), positions=positions, eta=figs.eta, contour_of_touch=figs.contour_of_touch,
             overlap=figs.overlap, wall_margin=figs.wall_margin, in_range=data.in_range.copy(), status=status,
             iterations=iterations, solve_time_s=time.perf_counter() - t0, slack_max=slack_max, cost=cost,
             formulation=cfg.formulation, notes=tuple(notes),

@@ -35,20 +35,23 @@ class LagModel:
     ----------
     alpha : velocity carried over one step, ``exp(-tau / T)`` (0 for ``T = 0``).
     b, c : position coefficients on ``V_i`` and ``V_{i-1}``, seconds (``b + c = tau``).
+    step_s, time_constant_s : ``tau`` and ``T``, seconds.
     """
 
     alpha: float
     b: float
     c: float
+    step_s: float
+    time_constant_s: float
 
     @classmethod
     def from_time_constant(cls, step_s: float, time_constant_s: float) -> LagModel:
         """The model for step ``tau = step_s`` and lag ``T = time_constant_s`` (>= 0), seconds."""
         if time_constant_s <= 0.0:
-            return cls(alpha=0.0, b=float(step_s), c=0.0)
+            return cls(alpha=0.0, b=float(step_s), c=0.0, step_s=float(step_s), time_constant_s=0.0)
         alpha = math.exp(-step_s / time_constant_s)
         b = (step_s - time_constant_s * (1.0 - alpha)) / (1.0 - alpha)
-        return cls(alpha=alpha, b=b, c=step_s - b)
+        return cls(alpha=alpha, b=b, c=step_s - b, step_s=float(step_s), time_constant_s=float(time_constant_s))
 
     def positions(self, p0: np.ndarray, v0: np.ndarray, velocities: np.ndarray) -> np.ndarray:
         """Positions ``p_1..p_N`` (N, 3) from ``p_0`` (3,), ``v_0`` (3,) and ``V_1..V_N`` (N, 3)."""
@@ -61,3 +64,20 @@ class LagModel:
         velocities = np.asarray(velocities, dtype=float)
         previous = np.vstack([np.asarray(v0, dtype=float)[None], velocities[:-1]])
         return (velocities - self.alpha * previous) / (1.0 - self.alpha)
+
+    def velocity_at(self, v0: np.ndarray, commands: np.ndarray, elapsed_s: float) -> np.ndarray:
+        """Vehicle velocity (3,) ``elapsed_s`` seconds after ``v0`` (3,) under ``commands`` (N, 3).
+
+        Each command is held ``tau``; past the last step the last command is held.
+        """
+        commands = np.asarray(commands, dtype=float)
+        v = np.asarray(v0, dtype=float).copy()
+        remaining = max(0.0, float(elapsed_s))
+        for i, u in enumerate(commands):
+            if remaining <= 0.0:
+                break
+            dt = remaining if i == len(commands) - 1 else min(remaining, self.step_s)
+            carried = math.exp(-dt / self.time_constant_s) if self.time_constant_s > 0.0 else 0.0
+            v = u + (v - u) * carried
+            remaining -= dt
+        return v
