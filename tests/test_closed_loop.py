@@ -49,20 +49,23 @@ def test_that_the_corridor_is_flown_behind_the_obstacle_within_the_lower_bound_a
     assert s["replans_with_slack"] == 0
 
 
-def test_that_the_upper_bound_makes_the_corridor_run_finish_sooner_without_touching_the_obstacle():
-    """The paper's claim holds for time to goal; see the README for what the upper bound costs.
+def test_that_the_upper_bound_makes_the_corridor_run_finish_sooner_without_collision():
+    """The paper's claim: with c_max the drone keeps up with the leader and finishes sooner.
 
-    With c_max = 60 % the band between the 30 % and 60 % contours is only
-    (r_max - r_min)(s1 + s2), about 0.13 m here, narrower than the vehicle's tracking
-    error under its velocity lag: the planner needs safety slack and the drone grazes a
-    wall. The obstacle itself is never touched. This test pins what does hold.
+    What does not hold here is "every planned contour >= c_min": c_max holds the plan
+    inside a band (r_max - r_min)(s1 + s2) of about 0.10 m, and the leader's estimate
+    moves along the normal by 0.04 m (median) to 0.09 m (p90) between replans, so some
+    replans start inside c_min and need slack (see the README). This test pins what
+    does hold, including no contact with the walls (there was before the planner
+    modelled the vehicle's velocity lag).
     """
-    with_bound = _run("configs/corridor.toml").summary()
+    with_bound = _run("configs/corridor.toml")
     without = _run("configs/corridor.toml", c_max=None).summary()
-    assert with_bound["goal_reached"] and without["goal_reached"]
-    assert with_bound["time_to_goal_s"] < without["time_to_goal_s"], (with_bound["time_to_goal_s"], without["time_to_goal_s"])
-    obstacle_hits = [c for c in _run("configs/corridor.toml").truth["collisions"] if c["kind"] == "obstacle"]
-    assert obstacle_hits == []
+    s = with_bound.summary()
+    assert not s["collided"], with_bound.truth["collisions"]
+    assert s["goal_reached"] and without["goal_reached"]
+    assert s["time_to_goal_s"] < without["time_to_goal_s"] - 5.0, (s["time_to_goal_s"], without["time_to_goal_s"])
+    assert s["min_wall_clearance_m"] > 0.05
 
 
 def test_that_the_same_seed_gives_the_same_flight():
