@@ -27,6 +27,10 @@ def test_that_plan_json_reaches_the_goal_with_contours_apart(formulation, capsys
                                  np.array(ob["covariances"]), ob["radius"] + out["drone_radius"])
     assert c.min() >= 0.599
     np.testing.assert_allclose(np.array(out["contour_of_touch"])[0], c, atol=1e-9)
+    # the scenario models a 0.3 s velocity lag: the commands lead the planned velocities
+    assert out["velocity_time_constant_s"] == 0.3
+    cmd, vel = np.array(out["commands"]), np.array(out["velocities"])
+    assert cmd.shape == (20, 3) and not np.allclose(cmd, vel, atol=1e-3)
 
 
 def test_that_plan_plot_writes_a_png(tmp_path, capsys):

@@ -101,6 +101,7 @@ def plan_to_json(planner: Planner, req: PlanRequest, plan: Plan, names: list[str
         "formulation": plan.formulation, "notes": list(plan.notes), "slack_max": plan.slack_max, "cost": plan.cost,
         "step_s": cfg.step_s, "start": req.position.tolist(), "target": req.target.tolist(),
         "positions": plan.positions.tolist(), "velocities": plan.velocities.tolist(),
+        "commands": plan.commands.tolist(), "velocity_time_constant_s": cfg.velocity_time_constant_s,
         "drone_covariances": req.drone_covs.tolist(), "drone_radius": cfg.drone_radius_m,
         "obstacles": [{"name": nm, "means": req.obstacle_means[j].tolist(), "covariances": req.obstacle_covs[j].tolist(),
                        "radius": float(req.obstacle_radii[j])} for j, nm in enumerate(names)],
