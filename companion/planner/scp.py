@@ -2,10 +2,13 @@
 
 Each SCP iteration linearises the collision rows around the current iterate
 (:mod:`companion.planner.formulations`), writes them into the fixed QP pattern
-(:mod:`companion.planner.qp_layout`), updates OSQP in place and solves. It stops when the
-cost changes by less than ``scp_tolerance`` (relative; ``scp_tolerance_warm`` for a
-replan warm-started from the previous plan), or the iterate no longer moves,
-*and* the exact recheck on the new iterate passes; or at the iteration cap.
+(:mod:`companion.planner.qp_layout`), updates OSQP in place and solves: the hard QP
+(safety slacks pinned), or, if its safety rows cannot all hold, the least-violation pair
+of QPs (:meth:`Planner._least_violation`). It stops when the cost changes by less than
+``scp_tolerance`` (relative; ``scp_tolerance_warm`` for a replan warm-started from the
+previous plan), or the iterate no longer moves, *and* the exact recheck on the new
+iterate passes (or the same slack is needed again: the violation is forced); or at the
+iteration cap.
 
 Cost (``0.5 x'Px + q'x + const``)::
 
@@ -14,7 +17,8 @@ Cost (``0.5 x'Px + q'x + const``)::
   + w_v sum_i |V_i|^2                                         small effort term
   + rho (sum s_lo + e_pos + e_neg + s_wall) + rho_c sum s_hi  L1 penalties on the slacks
 
-Positions obey the paper's holonomic model ``p_i = p_{i-1} + tau V_i``.
+Positions obey the paper's holonomic model ``p_i = p_{i-1} + tau V_i``, or with a velocity
+lag ``p_i = p_{i-1} + b V_i + c V_{i-1}`` (:mod:`companion.planner.vehicle_model`).
 
 The only clock is ``time.perf_counter()``, read for the ``solve_time_s`` diagnostic; it
 never influences the plan (no time limit is handed to the solver).
@@ -33,11 +37,12 @@ from companion.errors import InputError
 from companion.planner import formulations as F
 from companion.planner.config import PlannerConfig
 from companion.planner.osqp_qp import OsqpQp, QpSolution
+from companion.planner.qp_data import RequestData
 from companion.planner.qp_layout import QpLayout
 from companion.planner.request import Plan, PlanRequest
-from companion.planner.vehicle_model import LagModel
 from companion.planner.safety import (RECHECK_TOL_M, RECHECK_TOL_SIGMA, SafetyFigures, bhattacharyya_margin,
                                       exact_safety)
+from companion.planner.vehicle_model import LagModel
 
 logger = logging.getLogger(__name__)
 
@@ -111,83 +116,6 @@ class QpStep:
     solution: QpSolution
 
 
-class _RequestData:
-    """Per-request constants of the QP (cost, walls, kinematic bounds), computed once per solve."""
-
-    def __init__(self, planner: Planner, layout: QpLayout, request: PlanRequest) -> None:
-        cfg = planner.config
-        N, tau = layout.N, cfg.step_s
-        vmax, amax = cfg.velocity_max, cfg.accel_max
-        # V_0 clipped so that |V_1 - V_0| <= a tau and |V_1| <= v_max can hold together
-        self.v0 = np.clip(request.velocity, -vmax - amax * tau, vmax + amax * tau)
-        # terminal: w_t (p_N - g)' M (p_N - g), M = S_N^-1  ->  P += 2 w_t M, q += -2 w_t M g
-        m = np.linalg.inv(request.drone_covs[-1])
-        m = 0.5 * (m + m.T)
-        wt, wj, wv = cfg.weight_terminal, cfg.weight_jerk, cfg.weight_velocity
-        jerk_scale = 2.0 * wj / tau**4
-        # progress: (w_p / N) sum_i (p_i - g)' M (p_i - g): without it the plan only has to be
-        # at the target at step N, so each replan arrives "N steps from now" and the drone
-        # closes in asymptotically
-        wp = cfg.weight_progress / N
-        self.p_data = layout.p_data(jerk_scale, 2.0 * wv, 2.0 * wt * m, 2.0 * wp * m)
-        # jerk: |D2 V + c|^2 / tau^4 per axis with c_0 = V_0  ->  q += 2 w_j/tau^4 D2' c
-        c = np.zeros((N - 1, 3))
-        c[0] = self.v0
-        q = np.zeros(layout.n)
-        q[layout.col["V"].slice] = (jerk_scale * (layout.d2.T @ c)).ravel()
-        pn = layout.col["p"].start + 3 * (N - 1)
-        q[layout.col["p"].slice] = np.tile(-2.0 * wp * (m @ request.target), N)
-        q[pn:pn + 3] += -2.0 * wt * (m @ request.target)
-        for name in ("s_lo", "e_pos", "e_neg", "s_wall"):
-            q[layout.col[name].slice] = cfg.slack_penalty * layout.slack_scale   # variable = slack / slack_scale
-        q[layout.col["s_hi"].slice] = cfg.c_max_penalty * layout.slack_scale
-        self.q = q                                       # soft: slacks penalised
-        self.q_hard = q.copy()
-        self.q_hard[layout.slack_cols[layout.safety_slacks]] = 0.0   # hard: safety slacks pinned to 0
-        self.constant = (wt + wp * N) * request.target @ m @ request.target + wj / tau**4 * float(np.sum(c * c))
-        # A: constants plus wall normals (fixed for this request)
-        self.a_slot = layout.a_data0.copy()
-        if layout.W:
-            self.a_slot[layout.slot["wall_p"].slice] = np.broadcast_to(
-                request.walls_normal[:, None, :], (layout.W, N, 3)).ravel()
-        # bounds that do not depend on the iterate
-        self.l = np.zeros(layout.m)
-        self.u = np.zeros(layout.m)
-        dyn = np.zeros((N, 3))
-        dyn[0] = request.position + layout.lag.c * self.v0     # p_1 - b V_1 = p_0 + c V_0
-        self.l[layout.row["dyn"].slice] = self.u[layout.row["dyn"].slice] = dyn.ravel()
-        acc = np.broadcast_to(amax * tau, (N, 3)).copy()
-        lo_acc, hi_acc = -acc, acc.copy()
-        lo_acc[0] += self.v0
-        hi_acc[0] += self.v0
-        self.l[layout.row["accel"].slice], self.u[layout.row["accel"].slice] = lo_acc.ravel(), hi_acc.ravel()
-        if layout.row["cmd"].size:          # commands within the speed bound: (1 - a) |u_i| <= (1 - a) v_max
-            alpha = layout.lag.alpha
-            cmd = np.broadcast_to((1.0 - alpha) * vmax, (N, 3)).copy()
-            lo_cmd, hi_cmd = -cmd, cmd.copy()
-            lo_cmd[0] += alpha * self.v0
-            hi_cmd[0] += alpha * self.v0
-            self.l[layout.row["cmd"].slice], self.u[layout.row["cmd"].slice] = lo_cmd.ravel(), hi_cmd.ravel()
-        # walls: a.p_i - s <= b - r sqrt(a' S_i a) - R_drone
-        r_wall = 0.0 if cfg.formulation == "deterministic" else planner.r_min + F.BACKOFF_SIGMA
-        spread = np.sqrt(np.einsum("wk,nkl,wl->wn", request.walls_normal, request.drone_covs, request.walls_normal))
-        self.wall_upper = request.walls_offset[:, None] - r_wall * spread - cfg.drone_radius_m
-        if cfg.formulation == "deterministic":
-            self.wall_upper = self.wall_upper - F.BACKOFF_M
-        self.l[layout.row["wall"].slice] = -np.inf
-        self.u[layout.row["wall"].slice] = self.wall_upper.ravel()
-        self.l[layout.row["slack"].slice], self.u[layout.row["slack"].slice] = 0.0, np.inf
-        # sensing range: distance from the drone now to each obstacle's first predicted mean
-        if request.num_obstacles:
-            dist = np.linalg.norm(request.obstacle_means[:, 0, :] - request.position, axis=-1)
-            self.in_range = dist <= cfg.sensing_range_m
-        else:
-            self.in_range = np.zeros(0, dtype=bool)
-        self.upper_active = self.in_range & request.upper_bound_mask  # obstacles c_max applies to
-        self.radius_sum = request.obstacle_radii + cfg.drone_radius_m
-        self.y_warm: np.ndarray | None = None
-
-
 class Planner:
     """Overlap-constrained MPC solved by SCP on OSQP.
 
@@ -233,7 +161,7 @@ class Planner:
         cfg = self.config
         self._check(request)
         layout = self._layout(request)
-        data = _RequestData(self, layout, request)
+        data = RequestData(self.config, self.r_min, layout, request)
         last_y = self._last_y.get((layout.N, layout.P, layout.W))
         if warm_start is not None and last_y is not None:
             data.y_warm = last_y[layout.shift_rows]
@@ -283,7 +211,7 @@ class Planner:
         """
         self._check(request)
         layout = self._layout(request)
-        data = _RequestData(self, layout, request)
+        data = RequestData(self.config, self.r_min, layout, request)
         v_bar = np.asarray(velocities, dtype=float)
         p_bar = self.lag.positions(request.position, data.v0, v_bar)
         if self.config.formulation == "paper" and lam is None:
@@ -355,7 +283,7 @@ class Planner:
                              request.obstacle_means, request.obstacle_covs)
         return np.clip(res.lam, F.LAM_EPS, 1.0 - F.LAM_EPS)
 
-    def _qp_step(self, layout: QpLayout, data: _RequestData, request: PlanRequest, v_bar: np.ndarray,
+    def _qp_step(self, layout: QpLayout, data: RequestData, request: PlanRequest, v_bar: np.ndarray,
                  p_bar: np.ndarray, lam_bar: np.ndarray | None, *, first: bool) -> QpStep:
         cfg = self.config
         N, P = layout.N, layout.P
@@ -443,7 +371,7 @@ class Planner:
             wall_upper=data.wall_upper, v0=data.v0, solution=sol,
         )
 
-    def _least_violation(self, qp: OsqpQp, layout: QpLayout, data: _RequestData, x0: np.ndarray,
+    def _least_violation(self, qp: OsqpQp, layout: QpLayout, data: RequestData, x0: np.ndarray,
                          l: np.ndarray, u: np.ndarray) -> QpSolution:
         """The QP when its safety rows cannot all hold: violate them as little as possible.
 
@@ -487,12 +415,12 @@ class Planner:
         return qp.solve()                     # the plain soft QP: a plan, and its slack says so
 
     @staticmethod
-    def _safety_slack(data: _RequestData, step: QpStep) -> float:
+    def _safety_slack(data: RequestData, step: QpStep) -> float:
         """Largest safety slack of a QP step (in-range obstacle rows and walls), row units."""
         slack = [step.slack_obstacle[data.in_range].ravel(), step.slack_wall.ravel()]
         return float(max((float(s.max()) for s in slack if s.size), default=0.0))
 
-    def _recheck(self, request: PlanRequest, data: _RequestData, positions: np.ndarray) -> tuple[SafetyFigures, bool]:
+    def _recheck(self, request: PlanRequest, data: RequestData, positions: np.ndarray) -> tuple[SafetyFigures, bool]:
         """Exact figures and whether the formulation's own constraints hold on them."""
         cfg = self.config
         deterministic = cfg.formulation == "deterministic"
@@ -508,7 +436,7 @@ class Planner:
             ok &= bool(np.all(figs.eta[m] >= self.r_min - RECHECK_TOL_SIGMA))
         return figs, ok
 
-    def _finish(self, request: PlanRequest, data: _RequestData, step: QpStep | None, v_bar: np.ndarray,
+    def _finish(self, request: PlanRequest, data: RequestData, step: QpStep | None, v_bar: np.ndarray,
                 iterations: int, notes: list[str], t0: float) -> Plan:
         cfg = self.config
         if step is None:
