@@ -52,12 +52,12 @@ def test_that_the_corridor_is_flown_behind_the_obstacle_within_the_lower_bound_a
 def test_that_the_upper_bound_makes_the_corridor_run_finish_sooner_without_collision():
     """The paper's claim: with c_max the drone keeps up with the leader and finishes sooner.
 
-    What does not hold here is "every planned contour >= c_min": c_max holds the plan
-    inside a band (r_max - r_min)(s1 + s2) of about 0.10 m, and the leader's estimate
-    moves along the normal by 0.04 m (median) to 0.09 m (p90) between replans, so some
-    replans start inside c_min and need slack (see the README). This test pins what
-    does hold, including no contact with the walls (there was before the planner
-    modelled the vehicle's velocity lag).
+    What does not hold here is "every planned contour >= c_min": c_max brings every step
+    near the leader and the terminal cost presses them onto the c_min boundary, so an
+    update of the leader's estimate (0.04 m median, 0.09 m p90 along the normal between
+    replans) puts some replans' current state inside c_min and they need slack (see the
+    README). This test pins what does hold, including no contact with the walls (there
+    was before the planner modelled the vehicle's velocity lag).
     """
     with_bound = _run("configs/corridor.toml")
     without = _run("configs/corridor.toml", c_max=None).summary()
