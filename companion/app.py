@@ -27,7 +27,6 @@ from companion.link import Received
 from companion.offboard import Notify, OffboardConfig, OffboardSequencer, SendCommand
 from companion.overlap import contour_of_touch
 from companion.planner import Plan, Planner, PlanRequest
-from companion.planner.vehicle_model import LagModel
 from companion.scenario import CompanionScenario
 from estimator import DroneFilter, ObstacleTracker
 
@@ -110,7 +109,6 @@ class Companion:
         self._offsets: deque[tuple[float, float]] = deque(maxlen=64)
         self._plan: Plan | None = None
         self._plan_t0_v = 0.0
-        self._lag = LagModel.from_time_constant(scenario.planner.step_s, scenario.planner.velocity_time_constant_s)
         self._last_replan_t: float | None = None
         self._command = np.zeros(3)
         self._last_hb_t: float | None = None
@@ -296,7 +294,7 @@ class Companion:
         The velocity the vehicle flies under the commands sent so far, as the planner's
         model predicts it: without a velocity lag (the paper's model) that is the last
         command; with one, the current plan's velocity at ``t_v`` (its commands run
-        through :class:`~companion.planner.vehicle_model.LagModel`). Both are smooth.
+        through the planner's :class:`~companion.planner.vehicle_model.LagModel`). Both are smooth.
         Feeding the estimated velocity back instead (reports with 0.1 m/s noise) made
         the corridor runs weave: 0.6-0.75 m from the walls against 0.98 m (6 seeds).
         Without a current plan (braking, or before the first) the estimate is used.
@@ -305,7 +303,7 @@ class Companion:
             return self._command.copy()
         if self._plan is None:
             return np.asarray(est.velocity, dtype=float).copy()
-        return self._lag.velocity_at(self._plan.initial_velocity, self._plan.commands, t_v - self._plan_t0_v)
+        return self.planner.lag.velocity_at(self._plan.initial_velocity, self._plan.commands, t_v - self._plan_t0_v)
 
     def _replan(self, t_s: float, t_v: float, out: list) -> None:
         est = self.drone.state

@@ -99,5 +99,4 @@ class RequestData:
         else:
             self.in_range = np.zeros(0, dtype=bool)
         self.upper_active = self.in_range & request.upper_bound_mask  # obstacles c_max applies to
-        self.radius_sum = request.obstacle_radii + cfg.drone_radius_m
         self.y_warm: np.ndarray | None = None

@@ -77,6 +77,20 @@ class Block:
     def slice(self) -> slice:
         return slice(self.start, self.start + self.size)
 
+    @property
+    def indices(self) -> np.ndarray:
+        return np.arange(self.start, self.start + self.size)
+
+
+def _blocks(sizes: list[tuple[str, int]]) -> tuple[dict[str, Block], int]:
+    """Consecutive blocks of the given sizes, by name, and their total size."""
+    blocks: dict[str, Block] = {}
+    start = 0
+    for name, size in sizes:
+        blocks[name] = Block(start, size)
+        start += size
+    return blocks, start
+
 
 class QpLayout:
     """Index bookkeeping and constant entries of the QP for one shape.
@@ -90,9 +104,10 @@ class QpLayout:
     upper : bool
         Whether the obstacle rows carry a ``c_max`` side (``s_hi`` block).
     step_s : float
-        ``tau``, seconds (enters the constant ``dyn`` coefficients).
+        ``tau``, seconds (the step of the default ``lag``).
     lag : LagModel, optional
-        The vehicle's velocity lag (``dyn`` coefficients ``b``, ``c``); default none.
+        The vehicle's velocity lag (``dyn`` coefficients ``b``, ``c``); default none
+        (``b = tau``, ``c = 0``).
     slack_scale : float
         Coefficient ``1/rho`` of the slack columns in their rows.
     """
@@ -100,7 +115,7 @@ class QpLayout:
     def __init__(self, n_steps: int, n_obstacles: int, n_walls: int, *, paper: bool, upper: bool, step_s: float,
                  lag: LagModel | None = None, slack_scale: float = 1.0) -> None:
         N, P, W = n_steps, n_obstacles, n_walls
-        self.N, self.P, self.W, self.paper, self.upper, self.tau = N, P, W, paper, upper, step_s
+        self.N, self.P, self.W, self.paper, self.upper = N, P, W, paper, upper
         self.lag = lag if lag is not None else LagModel.from_time_constant(step_s, 0.0)
         self.slack_scale = slack_scale
         PN = P * N
@@ -108,28 +123,17 @@ class QpLayout:
         sizes = [("V", 3 * N), ("p", 3 * N), ("s_lo", PN), ("s_hi", PN if upper else 0),
                  ("lam", PN if paper else 0), ("e_pos", PN if paper else 0), ("e_neg", PN if paper else 0),
                  ("s_wall", W * N)]
-        self.col: dict[str, Block] = {}
-        start = 0
-        for name, size in sizes:
-            self.col[name] = Block(start, size)
-            start += size
-        self.n = start
+        self.col, self.n = _blocks(sizes)
         slack_names = ("s_lo", "s_hi", "e_pos", "e_neg", "s_wall")
-        self.slack_cols = np.concatenate([np.arange(self.col[s].start, self.col[s].start + self.col[s].size) for s in slack_names])
+        self.slack_cols = np.concatenate([self.col[s].indices for s in slack_names])
         #: the safety slacks (all but ``s_hi``), as positions within ``slack_cols``
-        self.safety_slacks = np.flatnonzero(~np.isin(self.slack_cols, np.arange(self.col["s_hi"].start,
-                                                                                 self.col["s_hi"].start + self.col["s_hi"].size)))
+        self.safety_slacks = np.flatnonzero(~np.isin(self.slack_cols, self.col["s_hi"].indices))
         # ---- rows
         lagged = self.lag.alpha > 0.0
-        rsizes = [("dyn", 3 * N), ("vbox", 3 * N), ("accel", 3 * N), ("cmd", 3 * N if lagged else 0), ("obs", PN), ("obs_hi", PN if upper else 0),
-                  ("adm", PN if paper else 0),
+        rsizes = [("dyn", 3 * N), ("vbox", 3 * N), ("accel", 3 * N), ("cmd", 3 * N if lagged else 0),
+                  ("obs", PN), ("obs_hi", PN if upper else 0), ("adm", PN if paper else 0),
                   ("lambox", PN if paper else 0), ("wall", W * N), ("slack", self.slack_cols.size)]
-        self.row: dict[str, Block] = {}
-        start = 0
-        for name, size in rsizes:
-            self.row[name] = Block(start, size)
-            start += size
-        self.m = start
+        self.row, self.m = _blocks(rsizes)
         self._build_shift()
         self._build_a()
         self._build_p()
@@ -164,7 +168,7 @@ class QpLayout:
 
     # ------------------------------------------------------------------ constraint matrix
     def _build_a(self) -> None:
-        N, P, W, tau, slack_scale = self.N, self.P, self.W, self.tau, self.slack_scale
+        N, P, W, slack_scale = self.N, self.P, self.W, self.slack_scale
         V, p = self.col["V"].start, self.col["p"].start
         rows: list[np.ndarray] = []
         cols: list[np.ndarray] = []

@@ -401,7 +401,8 @@ class Planner:
         qp.update(p_data=data.p_data, q=data.q)
         if np.all(np.isfinite(least.x)):     # an unconverged (1) still bounds the slack it needs
             needed = np.maximum(least.x[layout.slack_cols[layout.safety_slacks]], 0.0)
-            u[safety] = np.where(needed > SLACK_TOL, needed + LEAST_VIOLATION_MARGIN, 0.0) / layout.slack_scale
+            cap = np.where(needed > SLACK_TOL, needed + LEAST_VIOLATION_MARGIN, 0.0)   # unneeded: pinned
+            u[safety] = cap / layout.slack_scale
             qp.update(l=l, u=u)
             qp.warm_start(x=least.x, y=np.zeros(layout.m))
             sol = qp.solve(max_iter=self.config.solver_max_iter)

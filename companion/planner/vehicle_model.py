@@ -27,6 +27,12 @@ from dataclasses import dataclass
 import numpy as np
 
 
+def _with_previous(v0: np.ndarray, velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``V_1..V_N`` (N, 3) as floats and ``V_0..V_{N-1}`` (N, 3) beside them."""
+    velocities = np.asarray(velocities, dtype=float)
+    return velocities, np.vstack([np.asarray(v0, dtype=float)[None], velocities[:-1]])
+
+
 @dataclass(frozen=True)
 class LagModel:
     """Discretised first-order velocity lag for one step ``tau``.
@@ -55,14 +61,12 @@ class LagModel:
 
     def positions(self, p0: np.ndarray, v0: np.ndarray, velocities: np.ndarray) -> np.ndarray:
         """Positions ``p_1..p_N`` (N, 3) from ``p_0`` (3,), ``v_0`` (3,) and ``V_1..V_N`` (N, 3)."""
-        velocities = np.asarray(velocities, dtype=float)
-        previous = np.vstack([np.asarray(v0, dtype=float)[None], velocities[:-1]])
+        velocities, previous = _with_previous(v0, velocities)
         return np.asarray(p0, dtype=float) + np.cumsum(self.b * velocities + self.c * previous, axis=0)
 
     def commands(self, v0: np.ndarray, velocities: np.ndarray) -> np.ndarray:
         """Velocity commands ``u_1..u_N`` (N, 3) that make the vehicle reach ``V_1..V_N``."""
-        velocities = np.asarray(velocities, dtype=float)
-        previous = np.vstack([np.asarray(v0, dtype=float)[None], velocities[:-1]])
+        velocities, previous = _with_previous(v0, velocities)
         return (velocities - self.alpha * previous) / (1.0 - self.alpha)
 
     def velocity_at(self, v0: np.ndarray, commands: np.ndarray, elapsed_s: float) -> np.ndarray:
