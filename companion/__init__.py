@@ -2,9 +2,9 @@
 
 Layers (the pure core never imports the MAVLink edge):
 
-- ``companion.overlap``: overlap of two Gaussians (minmax procedure), pure numpy.
-- ``companion.planner``: sequential convex programming MPC on OSQP, pure.
-- ``companion.link`` and friends: the MAVLink edge (connections, PX4 modes, offboard).
+- ``companion.core.overlap``: overlap of two Gaussians (minmax procedure), pure numpy.
+- ``companion.core.planner``: sequential convex programming MPC on OSQP, pure.
+- ``companion.mavlink.link`` and friends: the MAVLink edge (connections, PX4 modes, offboard).
 - ``companion.commands``: one module per ``companion`` subcommand.
 """
 

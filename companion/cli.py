@@ -11,6 +11,7 @@ import argparse
 import importlib
 import logging
 import pkgutil
+from importlib import metadata
 import sys
 
 from companion import commands as _commands
@@ -19,11 +20,22 @@ from companion.errors import CompanionError
 logger = logging.getLogger(__name__)
 
 
+def _version() -> str:
+    """The installed distribution's version (the package's own when run from a source tree)."""
+    try:
+        return metadata.version("ogccmpc")
+    except metadata.PackageNotFoundError:
+        from companion import __version__
+
+        return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="companion",
         description="PX4 companion: overlap-of-Gaussians chance-constrained MPC over MAVLink.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging (-v info, -vv debug)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True

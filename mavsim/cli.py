@@ -17,6 +17,7 @@ import json
 import logging
 import math
 import sys
+from importlib import metadata
 
 from mavsim.core import Simulator
 from mavsim.errors import ScenarioError, SimulationError
@@ -43,8 +44,17 @@ def _positive(text: str) -> float:
     return v
 
 
+def _version() -> str:
+    """The installed distribution's version (mavsim ships in the ``ogccmpc`` distribution)."""
+    try:
+        return metadata.version("ogccmpc")
+    except metadata.PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="mavsim", description="PX4-like MAVLink kinematic simulator with scripted obstacles")
+    p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     p.add_argument("--scenario", help="scenario file (configs/*.toml); default: no obstacles, on the ground")
     p.add_argument("--speed", type=_positive, default=1.0, help="simulated seconds per wall second (default 1)")
     p.add_argument("--duration", type=_positive, help="simulated seconds to run (default: the scenario's duration_s)")

@@ -17,11 +17,11 @@ import logging
 from pathlib import Path
 
 from companion.commands._argtypes import integer_at_least, open_unit_interval, positive_seconds
-from companion.campaign import DEFAULT_DURATION_S, FAMILIES, METHODS, format_table, run_campaign
+from companion.offline.campaign import DEFAULT_DURATION_S, FAMILIES, METHODS, format_table, run_campaign
 
 logger = logging.getLogger(__name__)
 
-QUIET_LOGGERS = ("mavsim", "estimator", "companion.app", "companion.planner", "companion.offboard", "companion.link")
+QUIET_LOGGERS = ("mavsim", "estimator", "companion.loop.app", "companion.core.planner", "companion.mavlink.offboard", "companion.mavlink.link")
 
 
 def _methods(text: str) -> list[str]:

@@ -9,24 +9,28 @@ import socket
 import subprocess
 import sys
 import time
+from importlib import resources
 from pathlib import Path
 
 from companion.errors import ConfigError
-from companion.report import format_report, truth_report
+from companion.offline.report import format_report, truth_report
 
 SCENARIOS = ("antipodal", "corridor", "single_obstacle")
-_REPO_CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 
 def resolve_scenario(name: str) -> Path:
-    """A scenario name (``antipodal``) or a path to a TOML file."""
+    """A shipped scenario's name (``antipodal``) or a path to a TOML file.
+
+    The shipped scenarios are the repository's ``configs/*.toml``, installed as the package
+    ``companion.scenarios`` so that a wheel finds them from any working directory.
+    """
     path = Path(name)
     if path.suffix == ".toml" and path.exists():
         return path
-    for base in (Path.cwd() / "configs", _REPO_CONFIGS):
-        candidate = base / f"{name}.toml"
-        if candidate.exists():
-            return candidate
+    if name in SCENARIOS:
+        shipped = Path(str(resources.files("companion.scenarios") / f"{name}.toml"))
+        if shipped.is_file():
+            return shipped
     raise ConfigError(f"unknown scenario {name!r}: expected one of {', '.join(SCENARIOS)} or a .toml file")
 
 
@@ -78,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None) -> dict:
-    from companion.harness import run_lockstep  # imports mavsim: only the demo and campaign do
+    from companion.offline.harness import run_lockstep  # imports mavsim: only the demo and campaign do
 
     t0 = time.perf_counter()
     result = run_lockstep(

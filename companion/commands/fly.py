@@ -8,11 +8,11 @@ import logging
 import sys
 import time
 
-from companion.app import Companion
-from companion.link import DEFAULT_URL, open_link
-from companion.realtime import run_realtime
-from companion.report import companion_report, format_report
-from companion.scenario import load_scenario
+from companion.loop.app import Companion
+from companion.mavlink.link import DEFAULT_URL, open_link
+from companion.loop.realtime import run_realtime
+from companion.offline.report import companion_report, format_report
+from companion.loop.config import load_scenario
 
 logger = logging.getLogger(__name__)
 

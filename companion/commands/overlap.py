@@ -16,7 +16,7 @@ import numpy as np
 
 from companion.commands._argtypes import integer_at_least, open_unit_interval
 from companion.errors import InputError
-from companion.overlap import (
+from companion.core.overlap import (
     bhattacharyya,
     confidence_from_overlap,
     minmax,

@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from companion.errors import ConfigError
-from companion.planner import FORMULATIONS, Plan, Planner, PlanRequest
-from companion.scenario import load_scenario
+from companion.core.planner import FORMULATIONS, Plan, Planner, PlanRequest
+from companion.loop.config import load_scenario
 
 logger = logging.getLogger(__name__)
 

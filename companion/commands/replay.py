@@ -13,7 +13,7 @@ import json
 import logging
 import sys
 
-from companion.replay import replay
+from companion.offline.replay import replay
 
 logger = logging.getLogger(__name__)
 

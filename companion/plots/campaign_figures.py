@@ -20,7 +20,7 @@ def plot_campaign(summary: dict, directory: str | Path, *, c_min: float, title: 
     Parameters
     ----------
     summary : dict
-        Per-method summaries (:func:`companion.campaign.summarise`): ``collision_rate``,
+        Per-method summaries (:func:`companion.offline.campaign.summarise`): ``collision_rate``,
         ``collision_ci95``, ``episodes``, ``min_realised_contour`` (one value per episode,
         ``None`` when no obstacle came within sensing range).
     directory : output folder (created).

@@ -1,7 +1,7 @@
 """Figures of one flight from the companion's replan records (demo and replay).
 
 :func:`write_flight_figures` draws four PNGs from ``companion.records``
-(:class:`companion.app.ReplanRecord`) and the companion's configuration:
+(:class:`companion.loop.app.ReplanRecord`) and the companion's configuration:
 
 - ``topview.png``: paths of the drone and of every tracked obstacle seen from above,
   with confidence ellipses at a few instants, walls and static obstacles;
@@ -28,7 +28,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Circle, Ellipse  # noqa: E402
 
-from companion.overlap import touch_radius  # noqa: E402
+from companion.core.overlap import touch_radius  # noqa: E402
 
 logger = logging.getLogger(__name__)
 
@@ -77,7 +77,7 @@ def write_flight_figures(companion, out_dir: str | Path, truth: dict | None = No
 
     Parameters
     ----------
-    companion : :class:`companion.app.Companion`
+    companion : :class:`companion.loop.app.Companion`
         After the run: ``records`` (one per replan), ``cfg`` (planner config: ``c_min``,
         ``c_max``, ``velocity_max``, ``accel_max``) and ``scenario`` (walls, static
         obstacles, goal). A run with no replans or no obstacles gives figures that say so.

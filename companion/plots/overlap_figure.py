@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from companion.overlap import overlap_from_confidence  # noqa: E402
+from companion.core.overlap import overlap_from_confidence  # noqa: E402
 
 logger = logging.getLogger(__name__)
 

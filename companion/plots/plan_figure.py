@@ -19,8 +19,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Circle, Ellipse  # noqa: E402
 
-from companion.overlap import touch_radius  # noqa: E402
-from companion.planner import Plan, PlannerConfig, PlanRequest  # noqa: E402
+from companion.core.overlap import touch_radius  # noqa: E402
+from companion.core.planner import Plan, PlannerConfig, PlanRequest  # noqa: E402
 
 logger = logging.getLogger(__name__)
 

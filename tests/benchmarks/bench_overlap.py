@@ -13,7 +13,7 @@ import time
 import numpy as np
 from scipy import optimize
 
-from companion.overlap import minmax
+from companion.core.overlap import minmax
 
 PAIRS = 10_000
 REPEATS = 30

@@ -25,9 +25,9 @@ import time
 
 import numpy as np
 
-from companion import overlap
-from companion.planner import Planner, PlannerConfig, PlanRequest
-from companion.planner.formulations import BACKOFF_SIGMA
+from companion.core import overlap
+from companion.core.planner import Planner, PlannerConfig, PlanRequest
+from companion.core.planner.formulations import BACKOFF_SIGMA
 
 N, TAU, REPLANS, SCENES = 40, 0.3, 60, 8
 CVXPY_EVERY = 4

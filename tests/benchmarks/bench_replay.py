@@ -2,7 +2,7 @@
 
 The log is recorded first with a lockstep run of the antipodal scenario (full length,
 until 2 s after the goal), then replayed through a fresh companion with
-:func:`companion.replay.replay` (estimator and planner run exactly as in flight; no wall
+:func:`companion.offline.replay.replay` (estimator and planner run exactly as in flight; no wall
 clock). Rows: the whole replay (tlog reading included), and the same as a check that it
 reproduced the recorded commands (largest difference, m/s). Target: faster than real
 time by 10x, so an hour-long flight replays in minutes.
@@ -14,8 +14,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from companion.harness import run_lockstep
-from companion.replay import replay
+from companion.offline.harness import run_lockstep
+from companion.offline.replay import replay
 
 SCENARIO = Path(__file__).resolve().parents[2] / "configs" / "antipodal.toml"
 TARGET = 10.0

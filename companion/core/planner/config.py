@@ -1,0 +1,282 @@
+"""Planner configuration: a frozen, validated dataclass read from a ``[planner]`` table.
+
+Units are in the field names (NED frame, metres, seconds). Every value is checked on
+construction; a bad value raises :class:`companion.errors.ConfigError` naming the key and
+the value, and :meth:`PlannerConfig.from_toml_table` adds the file and section.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from companion.errors import ConfigError
+
+logger = logging.getLogger(__name__)
+
+#: Selectable collision formulations (SPEC section 3). ``hyperplane`` and ``paper`` bound
+#: the overlap of Gaussians; ``deterministic`` and ``bhattacharyya`` are baselines.
+FORMULATIONS: tuple[str, ...] = ("hyperplane", "paper", "deterministic", "bhattacharyya")
+
+#: Spatial dimension of the planner (3-D NED); the overlap module also handles 2-D.
+DIM = 3
+
+
+def _positive(name: str, value: float, *, allow_inf: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} = {value!r} is not a number") from None
+    if math.isnan(v) or v <= 0.0 or (math.isinf(v) and not allow_inf):
+        bound = "positive (inf allowed)" if allow_inf else "positive and finite"
+        raise ConfigError(f"{name} = {value!r} must be {bound}")
+    return v
+
+
+def _nonnegative(name: str, value: float) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} = {value!r} is not a number") from None
+    if not math.isfinite(v) or v < 0.0:
+        raise ConfigError(f"{name} = {value!r} must be finite and >= 0")
+    return v
+
+
+def _int_at_least(name: str, value: Any, low: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ConfigError(f"{name} = {value!r} must be an integer")
+    if value < low:
+        raise ConfigError(f"{name} = {value!r} must be >= {low}")
+    return int(value)
+
+
+def _axis_vector(name: str, value: Any) -> tuple[float, float, float]:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} = {value!r} must be three positive numbers (north, east, down)") from None
+    if arr.shape == ():
+        arr = np.full(DIM, float(arr))
+    if arr.shape != (DIM,) or not np.all(np.isfinite(arr)) or np.any(arr <= 0.0):
+        raise ConfigError(f"{name} = {value!r} must be three positive finite numbers (north, east, down)")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def _confidence(name: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} = {value!r} is not a number") from None
+    if not (0.0 < v < 1.0):
+        raise ConfigError(f"{name} = {value!r} must be a confidence strictly between 0 and 1")
+    return v
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Configuration of the overlap-constrained MPC (SPEC section 3).
+
+    Parameters
+    ----------
+    formulation : str
+        ``hyperplane`` (minmax normal per iterate, one row per obstacle and step),
+        ``paper`` (joint ``(V, lam)`` with linearised overlap and admissibility),
+        ``deterministic`` (means and radii only) or ``bhattacharyya`` (threshold on the
+        Bhattacharyya distance).
+    horizon_steps : int
+        Number of velocity commands ``N``.
+    step_s : float
+        Duration ``tau`` each command is held, seconds.
+    replan_period_s : float
+        Receding-horizon replanning period, seconds (used by the control loop only).
+    c_min : float
+        Lower bound on the confidence contour of touch, in (0, 1). Maps to
+        ``r_min = sqrt(chi2_3.ppf(c_min))`` and the overlap bound ``Y_max``.
+    c_max : float or None
+        Optional upper bound (corridor case: the ``c_max`` contours keep touching);
+        must exceed ``c_min``. Enforced softly, only for obstacles within sensing range.
+    velocity_max_mps : (3,) floats
+        Per-axis speed bound (north, east, down), m/s: ``-v_max <= V <= v_max``.
+    accel_max_mps2 : (3,) floats
+        Per-axis acceleration bound, m/s^2: ``|V_i - V_{i-1}| <= a_max * tau``
+        (``V_0`` is the current velocity).
+    velocity_time_constant_s : float
+        Time constant ``T`` of the vehicle's first-order velocity response to a velocity
+        setpoint, seconds (:mod:`companion.core.planner.vehicle_model`). 0 (default) is the
+        paper's model: the velocity follows the command at once. With ``T > 0`` the plan's
+        velocities are the vehicle's and the streamed commands lead them.
+    drone_radius_m : float
+        Physical radius of the drone, metres.
+    sensing_range_m : float
+        Obstacles whose mean at the first step is farther than this from the drone's
+        current position are ignored (their rows are relaxed). ``inf`` disables it.
+    weight_terminal : float
+        Weight of the terminal Mahalanobis cost ``(p_N - g)' S_N^-1 (p_N - g)``.
+    weight_jerk : float
+        Weight of the jerk cost ``sum |(V_{i+1} - 2 V_i + V_{i-1}) / tau^2|^2``, s^6/m^2.
+    weight_progress : float
+        Weight of the progress cost ``(1/N) sum_i (p_i - g)' S_N^-1 (p_i - g)`` (same metric
+        as the terminal cost): the drone gets to the target promptly instead of closing in
+        asymptotically. 0 gives the paper's terminal-only cost.
+    weight_velocity : float
+        Weight of a small effort term ``sum |V_i|^2`` (regularisation), s^2/m^2.
+    slack_penalty : float
+        L1 penalty on every safety slack (obstacle rows in their own units, walls in
+        metres); large so slack is used only when the constraints cannot all hold.
+    c_max_penalty : float
+        L1 penalty on the ``c_max`` slack (metres for ``hyperplane``). ``c_max`` is a
+        performance bound, not a safety one, so it is priced well below ``slack_penalty``:
+        an unreachable ``c_max`` then bends the plan towards the obstacle without fighting
+        the safety rows (with the safety penalty the SCP oscillated, measured).
+    scp_tolerance : float
+        Convergence when the cost changes by less than ``scp_tolerance * max(1, |J|)``
+        between SCP iterations (and the step is small).
+    scp_tolerance_warm : float
+        The same for a replan warm-started from the previous plan (receding horizon): it
+        refines a solution the next replan continues from, so it stops earlier. Measured
+        on the planner benchmark: 5e-3 instead of 1e-3 cut the p99 replan time from
+        23 ms to 12 ms (at most 5 SCP iterations instead of 14) with the same smallest
+        contour of touch; a cold start keeps the tighter ``scp_tolerance`` (with 5e-3 a
+        cold ``paper`` plan under ``c_max`` stopped before its contours touched).
+    scp_max_iterations : int
+        Cap on SCP iterations (QP solves) per plan.
+    trust_region_mps : float
+        Box trust region on each velocity component around the previous iterate, m/s.
+    trust_region_lam : float
+        Box trust region on the overlap parameters ``lam`` (``paper`` only).
+    solver_eps : float
+        OSQP ``eps_abs``.
+    solver_eps_rel : float
+        OSQP ``eps_rel``. The dual tolerance is ``eps_abs + eps_rel * max(|Px|, |A'y|, |q|)``;
+        when the slack penalty sits in ``q`` (soft re-solve only, see ``scp``) it loosens
+        with the penalty. The rows carry a back-off (``formulations.BACKOFF_SIGMA``) that
+        covers the primal tolerance, so returned plans meet ``c_min`` exactly.
+    solver_polish : bool
+        Whether OSQP polishes its solution (active-set refinement).
+    solver_max_iter : int
+        ADMM iterations allowed to the hard QP and to each least-violation QP before the
+        planner moves on (the last-resort soft QP gets 10,000). Unscaled OSQP took 10,000
+        iterations without declaring an infeasible hard QP infeasible (measured in closed
+        loop); warm-started hard QPs that solve need a few hundred, cold ones about a
+        thousand (planner benchmark). Tighter ``solver_eps`` needs more.
+    solver_rho : float
+        OSQP's initial ADMM step size, restored before every QP of the SCP (see
+        :mod:`companion.core.planner.osqp_qp`).
+    """
+
+    formulation: str = "hyperplane"
+    horizon_steps: int = 28
+    step_s: float = 0.3
+    replan_period_s: float = 0.3
+    c_min: float = 0.90
+    c_max: float | None = None
+    velocity_max_mps: tuple[float, float, float] = (3.0, 3.0, 1.0)
+    accel_max_mps2: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    velocity_time_constant_s: float = 0.0
+    drone_radius_m: float = 0.5
+    sensing_range_m: float = 10.0
+    weight_terminal: float = 1.0
+    weight_jerk: float = 0.05
+    weight_velocity: float = 0.1
+    weight_progress: float = 0.0
+    slack_penalty: float = 1e3
+    c_max_penalty: float = 100.0
+    scp_tolerance: float = 1e-3
+    scp_tolerance_warm: float = 5e-3
+    scp_max_iterations: int = 15
+    trust_region_mps: float = 1.0
+    trust_region_lam: float = 0.25
+    solver_eps: float = 1e-4
+    solver_eps_rel: float = 1e-4
+    solver_polish: bool = False
+    solver_max_iter: int = 2000
+    solver_rho: float = 0.1
+
+    def __post_init__(self) -> None:
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
+        if self.formulation not in FORMULATIONS:
+            raise ConfigError(f"formulation = {self.formulation!r} is not one of {', '.join(FORMULATIONS)}")
+        set_("horizon_steps", _int_at_least("horizon_steps", self.horizon_steps, 2))
+        set_("step_s", _positive("step_s", self.step_s))
+        set_("replan_period_s", _positive("replan_period_s", self.replan_period_s))
+        set_("c_min", _confidence("c_min", self.c_min))
+        if self.c_max is not None:
+            set_("c_max", _confidence("c_max", self.c_max))
+            if self.c_max <= self.c_min:
+                raise ConfigError(f"c_max = {self.c_max!r} must be greater than c_min = {self.c_min!r}")
+        set_("velocity_max_mps", _axis_vector("velocity_max_mps", self.velocity_max_mps))
+        set_("accel_max_mps2", _axis_vector("accel_max_mps2", self.accel_max_mps2))
+        set_("velocity_time_constant_s", _nonnegative("velocity_time_constant_s", self.velocity_time_constant_s))
+        set_("drone_radius_m", _nonnegative("drone_radius_m", self.drone_radius_m))
+        set_("sensing_range_m", _positive("sensing_range_m", self.sensing_range_m, allow_inf=True))
+        set_("weight_terminal", _positive("weight_terminal", self.weight_terminal))
+        set_("weight_jerk", _nonnegative("weight_jerk", self.weight_jerk))
+        set_("weight_velocity", _nonnegative("weight_velocity", self.weight_velocity))
+        set_("weight_progress", _nonnegative("weight_progress", self.weight_progress))
+        set_("slack_penalty", _positive("slack_penalty", self.slack_penalty))
+        set_("c_max_penalty", _positive("c_max_penalty", self.c_max_penalty))
+        set_("scp_tolerance", _positive("scp_tolerance", self.scp_tolerance))
+        set_("scp_tolerance_warm", _positive("scp_tolerance_warm", self.scp_tolerance_warm))
+        set_("scp_max_iterations", _int_at_least("scp_max_iterations", self.scp_max_iterations, 1))
+        set_("trust_region_mps", _positive("trust_region_mps", self.trust_region_mps))
+        set_("trust_region_lam", _positive("trust_region_lam", self.trust_region_lam))
+        set_("solver_eps", _positive("solver_eps", self.solver_eps))
+        set_("solver_eps_rel", _nonnegative("solver_eps_rel", self.solver_eps_rel))
+        set_("solver_max_iter", _int_at_least("solver_max_iter", self.solver_max_iter, 1))
+        set_("solver_rho", _positive("solver_rho", self.solver_rho))
+        if not isinstance(self.solver_polish, bool):
+            raise ConfigError(f"solver_polish = {self.solver_polish!r} must be true or false")
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        """Names accepted as keys of a ``[planner]`` table."""
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    @classmethod
+    def from_toml_table(cls, table: Mapping[str, Any], source: str = "[planner]", **overrides: Any) -> PlannerConfig:
+        """Build a configuration from a parsed TOML table.
+
+        Parameters
+        ----------
+        table : mapping
+            The ``[planner]`` table (keys are field names; lists become tuples).
+        source : str
+            Where the table came from, e.g. ``"configs/x.toml [planner]"``; prefixes errors.
+        **overrides
+            Values that take precedence over the table (e.g. ``drone_radius_m`` from
+            ``[vehicle] radius_m``); also checked against the field names.
+
+        Raises
+        ------
+        ConfigError
+            On an unknown key or an invalid value; the message names source, key and value.
+        """
+        known = set(cls.field_names())
+        merged = {**dict(table), **overrides}
+        for key, value in merged.items():
+            if key not in known:
+                raise ConfigError(
+                    f"{source}: unknown key {key!r} (value {value!r}); expected one of {', '.join(sorted(known))}"
+                )
+        kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in merged.items()}
+        try:
+            return cls(**kwargs)
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {exc}") from None
+
+    @property
+    def velocity_max(self) -> np.ndarray:
+        """Per-axis speed bound as an array (3,), m/s."""
+        return np.asarray(self.velocity_max_mps, dtype=float)
+
+    @property
+    def accel_max(self) -> np.ndarray:
+        """Per-axis acceleration bound as an array (3,), m/s^2."""
+        return np.asarray(self.accel_max_mps2, dtype=float)

@@ -1,0 +1,235 @@
+"""What the planner is asked (:class:`PlanRequest`) and what it answers (:class:`Plan`).
+
+All arrays are in the local NED frame: positions in metres, velocities in m/s,
+covariances in m^2. Step ``i`` (1-based in the docs, index ``i - 1`` in arrays) is the
+time ``i * tau`` after the request.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from companion.errors import InputError
+
+logger = logging.getLogger(__name__)
+
+#: Status of a plan: converged without safety slack / slack used (constraints violated,
+#: by ``Plan.slack_max``) / solver failure or the exact recheck failed.
+STATUSES: tuple[str, ...] = ("optimal", "slack", "failed")
+
+
+def _array(name: str, value: object, shape: tuple[int | None, ...]) -> np.ndarray:
+    """Float copy of ``value`` with the given shape (``None`` = any length), finite, read-only."""
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} is not a numeric array: {value!r}") from None
+    if arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape, shape)):
+        want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
+        raise InputError(f"{name} has shape {arr.shape}, expected {want}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} contains NaN or inf")
+    arr.setflags(write=False)
+    return arr
+
+
+def _check_covariances(name: str, covs: np.ndarray) -> None:
+    """Raise :class:`InputError` unless every (3, 3) matrix is symmetric positive definite."""
+    if covs.size == 0:
+        return
+    asym = np.max(np.abs(covs - np.swapaxes(covs, -1, -2)), axis=(-1, -2))
+    scale = np.max(np.abs(covs), axis=(-1, -2))
+    bad = asym > 1e-9 * np.maximum(scale, 1e-12) + 1e-15
+    if np.any(bad):
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise InputError(f"{name}{list(idx)} is not symmetric: {covs[idx].tolist()}")
+    eig_min = np.linalg.eigvalsh(covs)[..., 0]
+    if np.any(eig_min <= 0.0):
+        idx = tuple(int(i) for i in np.argwhere(eig_min <= 0.0)[0])
+        raise InputError(f"{name}{list(idx)} is not positive definite (smallest eigenvalue {eig_min[idx]:.3g} m^2)")
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """One planning problem (validated on construction; arrays are read-only copies).
+
+    Parameters
+    ----------
+    position : (3,) array
+        Drone position estimate now, NED metres.
+    velocity : (3,) array
+        Drone velocity estimate now, NED m/s (``V_0`` of the acceleration bound).
+    drone_covs : (N, 3, 3) array
+        Predicted drone position covariance at steps 1..N, m^2.
+    target : (3,) array
+        Where the drone should be at step N, NED metres.
+    obstacle_means : (P, N, 3) array
+        Predicted obstacle means at steps 1..N, NED metres (static obstacles: constant).
+    obstacle_covs : (P, N, 3, 3) array
+        Predicted obstacle position covariances at steps 1..N, m^2.
+    obstacle_radii : (P,) array
+        Obstacle physical radii, metres.
+    walls_normal : (W, 3) array
+        Unit normals ``a`` of half-spaces ``a . p <= b`` of free space (normalised here).
+    walls_offset : (W,) array
+        Offsets ``b``, metres.
+    upper_bound_mask : (P,) bool array, optional
+        Obstacles the ``c_max`` upper bound applies to (default: all in sensing range).
+        The caller decides which obstacle the drone is following, e.g. the one leading
+        the way to the goal in a corridor; the bound is released for the others.
+    """
+
+    position: np.ndarray
+    velocity: np.ndarray
+    drone_covs: np.ndarray
+    target: np.ndarray
+    obstacle_means: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))
+    obstacle_covs: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3, 3)))
+    obstacle_radii: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    walls_normal: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    walls_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    upper_bound_mask: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
+        set_("position", _array("position", self.position, (3,)))
+        set_("velocity", _array("velocity", self.velocity, (3,)))
+        set_("target", _array("target", self.target, (3,)))
+        covs = _array("drone_covs", self.drone_covs, (None, 3, 3))
+        n = covs.shape[0]
+        if n < 1:
+            raise InputError("drone_covs must hold at least one step")
+        _check_covariances("drone_covs", covs)
+        set_("drone_covs", covs)
+        means = np.asarray(self.obstacle_means)
+        if means.size == 0:
+            means = np.zeros((0, n, 3))
+        means = _array("obstacle_means", means, (None, n, 3))
+        p = means.shape[0]
+        ocovs = np.asarray(self.obstacle_covs)
+        if ocovs.size == 0 and p == 0:
+            ocovs = np.zeros((0, n, 3, 3))
+        ocovs = _array("obstacle_covs", ocovs, (p, n, 3, 3))
+        _check_covariances("obstacle_covs", ocovs)
+        radii = _array("obstacle_radii", np.atleast_1d(self.obstacle_radii) if p else np.zeros(0), (p,))
+        if np.any(radii < 0.0):
+            raise InputError(f"obstacle_radii must be >= 0 m, got {radii.tolist()}")
+        set_("obstacle_means", means)
+        set_("obstacle_covs", ocovs)
+        set_("obstacle_radii", radii)
+        normals = _array("walls_normal", np.reshape(self.walls_normal, (-1, 3)), (None, 3))
+        w = normals.shape[0]
+        offsets = _array("walls_offset", np.atleast_1d(self.walls_offset) if w else np.zeros(0), (w,))
+        norms = np.linalg.norm(normals, axis=1)
+        if np.any(norms < 1e-9):
+            raise InputError(f"walls_normal has a zero row: {normals.tolist()}")
+        unit = normals / norms[:, None]
+        set_("walls_normal", _array("walls_normal", unit, (w, 3)))
+        set_("walls_offset", _array("walls_offset", offsets / norms, (w,)))
+        if self.upper_bound_mask is None:
+            mask = np.ones(p, dtype=bool)
+        else:
+            mask = np.asarray(self.upper_bound_mask)
+            if mask.shape != (p,) or mask.dtype != bool:
+                raise InputError(f"upper_bound_mask must be a boolean array of shape ({p},), got {self.upper_bound_mask!r}")
+            mask = mask.copy()
+        mask.setflags(write=False)
+        set_("upper_bound_mask", mask)
+
+    @property
+    def horizon_steps(self) -> int:
+        """``N``, the number of predicted steps."""
+        return int(self.drone_covs.shape[0])
+
+    @property
+    def num_obstacles(self) -> int:
+        """``P``."""
+        return int(self.obstacle_means.shape[0])
+
+    @property
+    def num_walls(self) -> int:
+        """``W``."""
+        return int(self.walls_normal.shape[0])
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Result of one trajectory optimisation (all SCP iterations).
+
+    The safety figures (``eta``, ``contour_of_touch``, ``overlap``, ``wall_margin``) are
+    recomputed with the exact overlap on the returned positions and covariances, not
+    taken from the linearisation.
+
+    Attributes
+    ----------
+    velocities : (N, 3) array
+        Planned vehicle velocities ``V_1..V_N`` at the step ends, NED m/s.
+    commands : (N, 3) array
+        Velocity setpoints ``u_1..u_N`` to stream, each held ``tau``, NED m/s: equal to
+        ``velocities`` without a velocity lag, leading them with one
+        (:mod:`companion.core.planner.vehicle_model`).
+    initial_velocity : (3,) array
+        ``V_0``: the vehicle velocity the plan starts from (the request's, clipped to
+        what the bounds can hold), NED m/s.
+    positions : (N, 3) array
+        Planned positions ``p_1..p_N``, NED metres.
+    eta : (P, N) array
+        Radius-aware Mahalanobis touch radius (support margin along the minmax normal:
+        the radius at which the two ellipsoids, each inflated by its body radius, touch).
+    contour_of_touch : (P, N) array
+        ``chi2_3.cdf(eta^2)`` (0 where ``eta <= 0``).
+    overlap : (P, N) array
+        Overlap of Gaussians corresponding to ``contour_of_touch``.
+    wall_margin : (W, N) array
+        ``b - a.p_i - r_min sqrt(a' S_i a) - R_drone``, metres (>= 0: chance constraint holds).
+    in_range : (P,) bool array
+        Obstacles within sensing range (constrained); the others were ignored.
+    status : str
+        ``'optimal'``, ``'slack'`` or ``'failed'`` (see :data:`STATUSES`).
+    iterations : int
+        SCP iterations (QP solves).
+    solve_time_s : float
+        Wall time of the solve from ``time.perf_counter()``; a diagnostic only, it never
+        influences the plan.
+    slack_max : float
+        Largest safety slack in the last QP (units of the violated row: metres for walls
+        and the deterministic, hyperplane and bhattacharyya rows; ``paper`` rows are
+        divided by the norm of their gradient, see :mod:`companion.core.planner.formulations`).
+    cost : float
+        Objective of the last QP at its solution (terminal + jerk + effort + penalties).
+    formulation : str
+        Which formulation produced the plan.
+    notes : tuple of str
+        Diagnostics, e.g. ``'max_iterations'``, ``'c_max_violated'``, solver messages.
+    """
+
+    velocities: np.ndarray
+    positions: np.ndarray
+    eta: np.ndarray
+    contour_of_touch: np.ndarray
+    overlap: np.ndarray
+    wall_margin: np.ndarray
+    in_range: np.ndarray
+    status: str
+    iterations: int
+    solve_time_s: float
+    slack_max: float
+    cost: float
+    formulation: str
+    commands: np.ndarray
+    initial_velocity: np.ndarray
+    notes: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        """True when the plan is safe to fly as planned (status ``'optimal'``)."""
+        return self.status == "optimal"
+
+    @property
+    def min_contour_of_touch(self) -> float:
+        """Smallest contour of touch over in-range obstacles and steps (1.0 if none)."""
+        c = self.contour_of_touch[self.in_range]
+        return float(c.min()) if c.size else 1.0

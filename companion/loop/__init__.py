@@ -1,0 +1,1 @@
+"""The control loop: configuration, estimation, request building, planning, commands."""

@@ -1,0 +1,534 @@
+"""Decode inbound MAVLink messages into typed observations; encode outbound ones.
+
+Pure: functions take pymavlink message objects (``pymavlink.dialects.v20.common``)
+and numbers, and return dataclasses or message objects. Packing (sequence
+numbers, source ids, signing) belongs to :mod:`companion.mavlink.link`.
+
+Decoding never raises on bad traffic: a message that cannot be trusted comes back
+as :class:`Rejected` and is logged. Encoding raises :class:`~companion.errors.InputError`
+(a ``ValueError``) on non-finite input, because a wrong command must never be sent.
+
+Frames and units: local NED (x north, y east, z down), metres, metres per second,
+seconds; yaw in radians, 0 north, positive clockwise seen from above.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Union
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.mavlink import px4
+from companion.errors import InputError
+
+logger = logging.getLogger(__name__)
+
+Key = tuple[int, int]
+
+#: SET_POSITION_TARGET_LOCAL_NED type_mask bits (a set bit means "ignore").
+TM_X, TM_Y, TM_Z = 1, 2, 4
+TM_VX, TM_VY, TM_VZ = 8, 16, 32
+TM_AX, TM_AY, TM_AZ = 64, 128, 256
+TM_FORCE, TM_YAW, TM_YAW_RATE = 512, 1024, 2048
+#: Velocity only, yaw and yaw rate ignored: 3527.
+TYPE_MASK_VELOCITY = TM_X | TM_Y | TM_Z | TM_AX | TM_AY | TM_AZ | TM_YAW | TM_YAW_RATE
+#: Velocity and yaw (yaw rate ignored), as MAVSDK's VelocityNed: 2503.
+TYPE_MASK_VELOCITY_YAW = TYPE_MASK_VELOCITY & ~TM_YAW
+
+MAV_FRAME_LOCAL_NED = mavlink2.MAV_FRAME_LOCAL_NED  # 1
+MAV_FRAME_LOCAL_FRD = mavlink2.MAV_FRAME_LOCAL_FRD  # 20
+MAV_FRAME_BODY_FRD = mavlink2.MAV_FRAME_BODY_FRD  # 12
+#: ODOMETRY frame_id values taken as the shared local frame.
+LOCAL_FRAMES = frozenset({MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_FRD})
+
+#: Indices of the x/y/z block in a row-major upper triangle of a 6x6 matrix
+#: (ODOMETRY pose_covariance and velocity_covariance): (0,0)=0 (0,1)=1 (0,2)=2
+#: (1,1)=6 (1,2)=7 (2,2)=11.
+_UT_ROWS = np.array([0, 0, 0, 1, 1, 2])
+_UT_COLS = np.array([0, 1, 2, 1, 2, 2])
+_UT_INDEX = np.array([0, 1, 2, 6, 7, 11])
+
+STATUSTEXT_MAX_CHARS = 50
+NAMED_VALUE_MAX_CHARS = 10
+UINT32_WRAP = 1 << 32
+
+
+# --------------------------------------------------------------------------- decoded types
+
+
+@dataclass(frozen=True)
+class VehicleHeartbeat:
+    """A HEARTBEAT of any system, with PX4 mode and identity worked out.
+
+    ``mode`` is the PX4 mode name (``'OFFBOARD'``, ``'AUTO.LOITER'``) when
+    ``autopilot`` is PX4, else ``''``. ``is_autopilot`` applies
+    :func:`companion.mavlink.px4.is_autopilot_heartbeat`.
+    """
+
+    sysid: int
+    compid: int
+    autopilot: int
+    type: int
+    base_mode: int
+    custom_mode: int
+    system_status: int
+    armed: bool
+    mode: str
+    is_autopilot: bool
+
+    @property
+    def key(self) -> Key:
+        return (self.sysid, self.compid)
+
+    @property
+    def main_mode(self) -> int:
+        return px4.decode_custom_mode(self.custom_mode)[0]
+
+    @property
+    def sub_mode(self) -> int:
+        return px4.decode_custom_mode(self.custom_mode)[1]
+
+    @property
+    def offboard(self) -> bool:
+        """Main mode OFFBOARD (6): the only evidence that the companion is in control."""
+        return self.is_autopilot and self.main_mode == px4.MainMode.OFFBOARD
+
+
+@dataclass(frozen=True, eq=False)
+class PoseObservation:
+    """Position (and maybe velocity) of one MAVLink system in the local NED frame.
+
+    Attributes
+    ----------
+    key : (int, int)
+        (system id, component id) of the sender.
+    t_s : float
+        Time of validity in seconds, from the message's own ``time_usec`` or
+        ``time_boot_ms`` (time since the sender's boot; shared time base).
+    position_ned : ndarray (3,)
+        Metres, NED.
+    velocity_ned : ndarray (3,) or None
+        Metres per second, NED; None when the sender marks it unknown (NaN).
+    position_cov, velocity_cov : ndarray (3, 3) or None
+        Covariances in m^2 and (m/s)^2, symmetric positive definite; None when
+        unknown (NaN in element 0, or a message without covariance).
+    source : str
+        ``'ODOMETRY'`` or ``'LOCAL_POSITION_NED'``.
+    """
+
+    key: Key
+    t_s: float
+    position_ned: np.ndarray
+    velocity_ned: np.ndarray | None
+    position_cov: np.ndarray | None
+    velocity_cov: np.ndarray | None
+    source: str
+
+    @property
+    def position_var(self) -> np.ndarray | None:
+        """Diagonal of ``position_cov`` (m^2), or None."""
+        return None if self.position_cov is None else np.diag(self.position_cov).copy()
+
+    @property
+    def velocity_var(self) -> np.ndarray | None:
+        """Diagonal of ``velocity_cov`` ((m/s)^2), or None."""
+        return None if self.velocity_cov is None else np.diag(self.velocity_cov).copy()
+
+
+@dataclass(frozen=True)
+class CommandAck:
+    """COMMAND_ACK: ``result`` 0 accepted, 1 temporarily rejected, 2 denied, 3 unsupported, 4 failed, 5 in progress."""
+
+    key: Key
+    command: int
+    result: int
+    target_system: int
+    target_component: int
+
+    @property
+    def accepted(self) -> bool:
+        return self.result == mavlink2.MAV_RESULT_ACCEPTED
+
+    @property
+    def result_name(self) -> str:
+        entry = mavlink2.enums["MAV_RESULT"].get(self.result)
+        return entry.name if entry is not None else f"MAV_RESULT({self.result})"
+
+
+@dataclass(frozen=True)
+class StatusText:
+    """STATUSTEXT: ``severity`` 0 emergency .. 7 debug (MAV_SEVERITY)."""
+
+    key: Key
+    severity: int
+    text: str
+
+
+@dataclass(frozen=True)
+class Rejected:
+    """An inbound message that was not trusted; ``reason`` says why."""
+
+    key: Key
+    msg_type: str
+    reason: str
+
+
+Decoded = Union[VehicleHeartbeat, PoseObservation, CommandAck, StatusText, Rejected]
+
+
+# --------------------------------------------------------------------------- decoding
+
+
+def source_key(msg: mavlink2.MAVLink_message) -> Key:
+    """(system id, component id) of the sender of a parsed message."""
+    return (int(msg.get_srcSystem()), int(msg.get_srcComponent()))
+
+
+def decode(msg: mavlink2.MAVLink_message) -> Decoded | None:
+    """Decode one parsed message; None for message types the companion ignores.
+
+    Never raises on message content: untrusted content gives :class:`Rejected`
+    (logged at WARNING).
+    """
+    handler = _DECODERS.get(msg.get_type())
+    if handler is None:
+        return None
+    try:
+        return handler(msg)
+    except Exception as exc:  # a malformed message must never stop the control loop
+        return _reject(msg, f"malformed: {type(exc).__name__}: {exc}")
+
+
+def decode_heartbeat(msg: mavlink2.MAVLink_heartbeat_message) -> VehicleHeartbeat:
+    """HEARTBEAT to :class:`VehicleHeartbeat`."""
+    sysid, compid = source_key(msg)
+    is_ap = px4.is_autopilot_heartbeat(sysid, compid, msg.autopilot, msg.type)
+    mode = px4.mode_name(msg.custom_mode) if msg.autopilot == px4.MAV_AUTOPILOT_PX4 else ""
+    return VehicleHeartbeat(
+        sysid=sysid,
+        compid=compid,
+        autopilot=int(msg.autopilot),
+        type=int(msg.type),
+        base_mode=int(msg.base_mode),
+        custom_mode=int(msg.custom_mode),
+        system_status=int(msg.system_status),
+        armed=px4.is_armed(msg.base_mode),
+        mode=mode,
+        is_autopilot=is_ap,
+    )
+
+
+def decode_command_ack(msg: mavlink2.MAVLink_command_ack_message) -> CommandAck:
+    """COMMAND_ACK to :class:`CommandAck` (MAVLink 1 packets carry no target: 0, 0)."""
+    return CommandAck(
+        key=source_key(msg),
+        command=int(msg.command),
+        result=int(msg.result),
+        target_system=int(getattr(msg, "target_system", 0) or 0),
+        target_component=int(getattr(msg, "target_component", 0) or 0),
+    )
+
+
+def decode_statustext(msg: mavlink2.MAVLink_statustext_message) -> StatusText:
+    """STATUSTEXT to :class:`StatusText` (one chunk; text stripped of NULs)."""
+    text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode("ascii", "replace")
+    return StatusText(key=source_key(msg), severity=int(msg.severity), text=text.rstrip("\x00"))
+
+
+def covariance_from_upper_triangle(values, *, what: str) -> np.ndarray | None | str:
+    """x/y/z 3x3 block of a 21-element row-major upper triangle of a 6x6 matrix.
+
+    Returns the symmetric (3, 3) matrix, None when element 0 is NaN (unknown, as
+    MAVLink defines it), or a string giving the reason it cannot be trusted
+    (wrong length, non-finite entry, negative variance, not positive definite).
+    """
+    arr = np.asarray(values, dtype=float)
+    if arr.shape != (21,):
+        return f"{what} has {arr.size} elements, expected 21"
+    if math.isnan(arr[0]):
+        return None
+    block = arr[_UT_INDEX]
+    if not np.all(np.isfinite(block)):
+        return f"{what} has non-finite entries in the x/y/z block: {block.tolist()}"
+    cov = np.zeros((3, 3))
+    cov[_UT_ROWS, _UT_COLS] = block
+    cov[_UT_COLS, _UT_ROWS] = block
+    diag = np.diag(cov)
+    if np.any(diag < 0.0):
+        return f"{what} has negative variances {diag.tolist()}"
+    try:
+        np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        return f"{what} x/y/z block is not positive definite: {cov.tolist()}"
+    return cov
+
+
+def _quat_to_rot(q) -> np.ndarray | None:
+    """Rotation matrix body -> local of a MAVLink quaternion (w, x, y, z); None if unusable."""
+    w, x, y, z = (float(v) for v in q)
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    if not math.isfinite(n) or n < 1e-6:
+        return None
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def decode_odometry(msg: mavlink2.MAVLink_odometry_message) -> PoseObservation | Rejected:
+    """ODOMETRY to :class:`PoseObservation`, or :class:`Rejected`.
+
+    Accepted: ``frame_id`` LOCAL_NED (1) or LOCAL_FRD (20); finite position.
+    Velocity is taken in the local frame when ``child_frame_id`` is 1, 20 or 0,
+    rotated by the attitude quaternion when it is BODY_FRD (12), and dropped
+    (None) for other child frames or when it is NaN. A covariance whose element
+    0 is NaN is unknown (None); one with other non-finite entries, negative
+    variances or not positive definite rejects the whole message.
+    """
+    key = source_key(msg)
+    if int(msg.frame_id) not in LOCAL_FRAMES:
+        return _reject(msg, f"frame_id {msg.frame_id} is not LOCAL_NED (1) or LOCAL_FRD (20)")
+    position = np.array([msg.x, msg.y, msg.z], dtype=float)
+    if not np.all(np.isfinite(position)):
+        return _reject(msg, f"non-finite position {position.tolist()}")
+    t_s = int(msg.time_usec) * 1e-6
+
+    pos_cov = covariance_from_upper_triangle(msg.pose_covariance, what="pose_covariance")
+    if isinstance(pos_cov, str):
+        return _reject(msg, pos_cov)
+    vel_cov = covariance_from_upper_triangle(msg.velocity_covariance, what="velocity_covariance")
+    if isinstance(vel_cov, str):
+        return _reject(msg, vel_cov)
+
+    velocity: np.ndarray | None = np.array([msg.vx, msg.vy, msg.vz], dtype=float)
+    if not np.all(np.isfinite(velocity)):
+        velocity, vel_cov = None, None
+    else:
+        child = int(msg.child_frame_id)
+        if child in LOCAL_FRAMES or child == 0:
+            pass
+        elif child == MAV_FRAME_BODY_FRD:
+            rot = _quat_to_rot(msg.q)
+            if rot is None:
+                logger.debug("ODOMETRY from %s: body velocity without usable attitude; velocity dropped", key)
+                velocity, vel_cov = None, None
+            else:
+                velocity = rot @ velocity
+                vel_cov = None if vel_cov is None else rot @ vel_cov @ rot.T
+        else:
+            logger.debug("ODOMETRY from %s: child_frame_id %s not understood; velocity dropped", key, child)
+            velocity, vel_cov = None, None
+
+    return PoseObservation(
+        key=key,
+        t_s=t_s,
+        position_ned=position,
+        velocity_ned=velocity,
+        position_cov=pos_cov,
+        velocity_cov=vel_cov,
+        source="ODOMETRY",
+    )
+
+
+def decode_local_position_ned(msg: mavlink2.MAVLink_local_position_ned_message) -> PoseObservation | Rejected:
+    """LOCAL_POSITION_NED to :class:`PoseObservation` (no covariance), or :class:`Rejected`."""
+    position = np.array([msg.x, msg.y, msg.z], dtype=float)
+    if not np.all(np.isfinite(position)):
+        return _reject(msg, f"non-finite position {position.tolist()}")
+    velocity: np.ndarray | None = np.array([msg.vx, msg.vy, msg.vz], dtype=float)
+    if not np.all(np.isfinite(velocity)):
+        velocity = None
+    return PoseObservation(
+        key=source_key(msg),
+        t_s=int(msg.time_boot_ms) * 1e-3,
+        position_ned=position,
+        velocity_ned=velocity,
+        position_cov=None,
+        velocity_cov=None,
+        source="LOCAL_POSITION_NED",
+    )
+
+
+def _reject(msg: mavlink2.MAVLink_message, reason: str) -> Rejected:
+    key = source_key(msg)
+    logger.warning("rejected %s from system %d component %d: %s", msg.get_type(), key[0], key[1], reason)
+    return Rejected(key=key, msg_type=msg.get_type(), reason=reason)
+
+
+_DECODERS = {
+    "HEARTBEAT": decode_heartbeat,
+    "ODOMETRY": decode_odometry,
+    "LOCAL_POSITION_NED": decode_local_position_ned,
+    "COMMAND_ACK": decode_command_ack,
+    "STATUSTEXT": decode_statustext,
+}
+
+
+# --------------------------------------------------------------------------- encoding
+
+
+def _boot_ms(t_boot_ms: int) -> int:
+    value = int(t_boot_ms)
+    if value != t_boot_ms or value < 0:
+        raise InputError(f"time_boot_ms must be a non-negative integer, got {t_boot_ms!r}")
+    return value % UINT32_WRAP
+
+
+def velocity_setpoint(
+    t_boot_ms: int,
+    v_ned,
+    yaw: float | None = None,
+    *,
+    target_system: int = 1,
+    target_component: int = 1,
+) -> mavlink2.MAVLink_set_position_target_local_ned_message:
+    """SET_POSITION_TARGET_LOCAL_NED commanding a velocity in MAV_FRAME_LOCAL_NED.
+
+    Parameters
+    ----------
+    t_boot_ms : int
+        Companion time since boot, milliseconds (wrapped to uint32).
+    v_ned : array_like (3,)
+        Velocity setpoint, m/s, NED (climb is negative vz).
+    yaw : float, optional
+        Yaw to hold, radians (0 north). None leaves yaw to the vehicle
+        (type_mask 3527); a value uses type_mask 2503.
+
+    Raises
+    ------
+    InputError
+        If ``v_ned`` is not three finite numbers or ``yaw`` is not finite.
+    """
+    v = np.asarray(v_ned, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise InputError(f"velocity setpoint must be 3 finite m/s values (NED), got {v_ned!r}")
+    if yaw is not None and not math.isfinite(float(yaw)):
+        raise InputError(f"yaw setpoint must be finite radians, got {yaw!r}")
+    mask = TYPE_MASK_VELOCITY if yaw is None else TYPE_MASK_VELOCITY_YAW
+    return mavlink2.MAVLink_set_position_target_local_ned_message(
+        _boot_ms(t_boot_ms),
+        int(target_system),
+        int(target_component),
+        MAV_FRAME_LOCAL_NED,
+        mask,
+        0.0, 0.0, 0.0,
+        float(v[0]), float(v[1]), float(v[2]),
+        0.0, 0.0, 0.0,
+        0.0 if yaw is None else float(yaw),
+        0.0,
+    )
+
+
+def companion_heartbeat(system_status: int = mavlink2.MAV_STATE_ACTIVE) -> mavlink2.MAVLink_heartbeat_message:
+    """HEARTBEAT of the companion: type ONBOARD_CONTROLLER (18), autopilot INVALID (8)."""
+    return mavlink2.MAVLink_heartbeat_message(
+        mavlink2.MAV_TYPE_ONBOARD_CONTROLLER,
+        mavlink2.MAV_AUTOPILOT_INVALID,
+        0,
+        0,
+        int(system_status),
+        3,
+    )
+
+
+def statustext(severity: int, text: str) -> mavlink2.MAVLink_statustext_message:
+    """STATUSTEXT; ``text`` is made ASCII and truncated to 50 characters.
+
+    ``severity`` is MAV_SEVERITY: 0 emergency, 2 critical, 4 warning, 6 info.
+    """
+    severity = int(severity)
+    if not 0 <= severity <= 7:
+        raise InputError(f"STATUSTEXT severity must be 0..7 (MAV_SEVERITY), got {severity}")
+    raw = str(text).encode("ascii", "replace")[:STATUSTEXT_MAX_CHARS]
+    if len(str(text)) > STATUSTEXT_MAX_CHARS:
+        logger.debug("STATUSTEXT truncated to %d characters: %r", STATUSTEXT_MAX_CHARS, text)
+    return mavlink2.MAVLink_statustext_message(severity, raw, 0, 0)
+
+
+def named_value_float(t_boot_ms: int, name: str, value: float) -> mavlink2.MAVLink_named_value_float_message:
+    """NAMED_VALUE_FLOAT (e.g. ``'ct_min'``, the current minimum contour of touch).
+
+    Raises
+    ------
+    InputError
+        If ``name`` is empty, longer than 10 characters or not ASCII (silent
+        truncation could make two names collide).
+    """
+    try:
+        raw = str(name).encode("ascii")
+    except UnicodeEncodeError:
+        raise InputError(f"NAMED_VALUE_FLOAT name must be ASCII, got {name!r}") from None
+    if not 0 < len(raw) <= NAMED_VALUE_MAX_CHARS:
+        raise InputError(f"NAMED_VALUE_FLOAT name must be 1..10 characters, got {name!r}")
+    return mavlink2.MAVLink_named_value_float_message(_boot_ms(t_boot_ms), raw, float(value))
+
+
+def command_long(
+    command: int,
+    params=(),
+    *,
+    target_system: int = 1,
+    target_component: int = 1,
+    confirmation: int = 0,
+) -> mavlink2.MAVLink_command_long_message:
+    """COMMAND_LONG with up to seven parameters (missing ones are 0).
+
+    ``confirmation`` counts retransmissions (0 first, then 1, 2, ...).
+    """
+    values = [float(p) for p in params]
+    if len(values) > 7:
+        raise InputError(f"COMMAND_LONG takes at most 7 params, got {len(values)}")
+    values += [0.0] * (7 - len(values))
+    return mavlink2.MAVLink_command_long_message(
+        int(target_system), int(target_component), int(command), int(confirmation) & 0xFF, *values
+    )
+
+
+def set_mode_command(custom_mode: int, armed: bool, **target) -> mavlink2.MAVLink_command_long_message:
+    """MAV_CMD_DO_SET_MODE (176) for a packed PX4 ``custom_mode``.
+
+    param1 = 1 (custom mode enabled) + 128 if the vehicle is armed, param2 = main
+    mode unpacked, param3 = sub mode; see :func:`companion.mavlink.px4.set_mode_params`.
+    """
+    return command_long(mavlink2.MAV_CMD_DO_SET_MODE, px4.set_mode_params(custom_mode, armed), **target)
+
+
+def offboard_command(armed: bool, **target) -> mavlink2.MAVLink_command_long_message:
+    """DO_SET_MODE OFFBOARD: param2 = 6, param3 = 0."""
+    return set_mode_command(px4.OFFBOARD, armed, **target)
+
+
+def hold_command(armed: bool, **target) -> mavlink2.MAVLink_command_long_message:
+    """DO_SET_MODE AUTO.LOITER (Hold): param2 = 4, param3 = 3."""
+    return set_mode_command(px4.AUTO_LOITER, armed, **target)
+
+
+def posctl_command(armed: bool, **target) -> mavlink2.MAVLink_command_long_message:
+    """DO_SET_MODE POSCTL (Position): param2 = 3, param3 = 0."""
+    return set_mode_command(px4.POSCTL, armed, **target)
+
+
+def arm_command(arm: bool, **target) -> mavlink2.MAVLink_command_long_message:
+    """MAV_CMD_COMPONENT_ARM_DISARM (400): param1 = 1 arm, 0 disarm."""
+    return command_long(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, (1.0 if arm else 0.0,), **target)
+
+
+def takeoff_command(altitude_amsl_m: float = math.nan, **target) -> mavlink2.MAVLink_command_long_message:
+    """MAV_CMD_NAV_TAKEOFF (22); param7 = altitude AMSL in metres, NaN for PX4's MIS_TAKEOFF_ALT.
+
+    param4 (yaw) is NaN: keep the current heading. param5/6 (lat/lon) NaN: here.
+    """
+    alt = float(altitude_amsl_m)
+    if math.isinf(alt):
+        raise InputError(f"takeoff altitude must be finite metres AMSL or NaN, got {altitude_amsl_m!r}")
+    return command_long(
+        mavlink2.MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, math.nan, math.nan, math.nan, alt), **target
+    )

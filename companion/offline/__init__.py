@@ -1,0 +1,1 @@
+"""Offline tools: the lockstep harness, tlog replay, Monte Carlo campaigns, reports."""

@@ -1,0 +1,143 @@
+"""Run the bundled simulator and the companion together in one process, in lockstep.
+
+This is the one place where ``companion`` imports ``mavsim`` (the dependency rule's
+exception, see ``docs/ARCHITECTURE.md``): ``companion demo``, ``companion campaign`` and
+the closed-loop tests use it. The two sides exchange real MAVLink bytes through a
+:class:`~companion.mavlink.link.MemoryLink`; there are no sockets and no sleeping, and the same
+seed gives the same run. Packet loss and other link faults are applied here, between
+the two sides, by dropping whole packets.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from companion.loop.app import Companion
+from companion.mavlink.link import MemoryLink
+from companion.mavlink.offboard import OffboardConfig
+from companion.offline.report import run_report
+from companion.loop.config import load_scenario
+from mavsim.lockstep import LockstepSimulator
+
+logger = logging.getLogger(__name__)
+
+#: ``drop(t_s, direction, packet) -> bool``; direction is ``"to_companion"`` or ``"to_vehicle"``.
+PacketFilter = Callable[[float, str, bytes], bool]
+
+
+@dataclass
+class RunResult:
+    """Outcome of one lockstep run: the simulator's truth and the companion's own records."""
+
+    scenario: str
+    seed: int
+    formulation: str
+    truth: dict
+    companion: Companion
+    sim_time_s: float
+    dropped_packets: int = 0
+    tlog_path: Path | None = None
+    extra: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        """The numbers ``companion demo`` prints (JSON-serialisable): truth plus the companion's view."""
+        return {"seed": self.seed, "dropped_packets": self.dropped_packets, **run_report(self.companion, self.truth)}
+
+
+def run_lockstep(
+    scenario_path: str | Path,
+    *,
+    seed: int = 0,
+    duration_s: float | None = None,
+    tlog_path: str | Path | None = None,
+    sim_tlog_path: str | Path | None = None,
+    drop: PacketFilter | None = None,
+    loss_probability: float = 0.0,
+    offboard: OffboardConfig | None = None,
+    stop_after_goal_s: float | None = 2.0,
+    inject: Callable[[float], list[bytes]] | None = None,
+    **planner_overrides,
+) -> RunResult:
+    """Fly one scenario in lockstep: ``mavsim`` and the companion over MAVLink bytes.
+
+    Parameters
+    ----------
+    scenario_path : scenario TOML file (both programs read it; the companion never reads
+        the obstacles' scripted paths).
+    seed : seeds the simulator's noise and the packet loss.
+    duration_s : simulated time limit (default: the scenario's ``duration_s``).
+    tlog_path : record the companion's link as a tlog (what ``companion replay`` reads).
+    sim_tlog_path : record the simulator's API link as a tlog.
+    drop : extra packet filter (fault injection); ``loss_probability`` drops packets at
+        random in both directions.
+    stop_after_goal_s : end the run this long after the truth says the goal was reached.
+    inject : ``inject(t_s) -> [packet, ...]`` extra packets delivered to the companion.
+    **planner_overrides : replace ``[planner]`` keys (e.g. ``formulation``, ``c_max``).
+    """
+    scenario = load_scenario(scenario_path, **planner_overrides)
+    sim = LockstepSimulator.from_file(scenario_path, seed=seed, tlog=sim_tlog_path)
+    companion = Companion(scenario, offboard=offboard)
+    link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path)
+    rng = np.random.default_rng([seed, 0xC0FFEE])
+    dt = 1.0 / scenario.loop.setpoint_rate_hz
+    limit = scenario.duration_s if duration_s is None else float(duration_s)
+    dropped = 0
+    goal_t: float | None = None
+    # True state at each replan (campaign: per-step collision truth beside the estimates).
+    replan_truth: list[tuple[float, np.ndarray, dict]] = []
+
+    def lost(t_s: float, direction: str, packet: bytes) -> bool:
+        if loss_probability > 0.0 and rng.random() < loss_probability:
+            return True
+        return drop is not None and drop(t_s, direction, packet)
+
+    try:
+        n_ticks = int(math.ceil(limit / dt - 1e-9))
+        for _ in range(n_ticks):
+            for t_pkt, packet in sim.advance(dt):
+                if lost(t_pkt, "to_companion", packet):
+                    dropped += 1
+                    continue
+                link.deliver(t_pkt, packet)
+            if inject is not None:
+                for packet in inject(sim.time_s):
+                    link.deliver(sim.time_s, packet)
+            for rx in link.poll():
+                companion.handle(rx)
+            n_records = len(companion.records)
+            for msg in companion.tick(sim.time_s):
+                link.send(msg)
+            if len(companion.records) > n_records:
+                tr = sim.truth
+                replan_truth.append((tr.t_s, tr.drone_position_ned_m, tr.obstacle_positions_ned_m))
+            for packet in link.take_outbound():
+                if lost(sim.time_s, "to_vehicle", packet):
+                    dropped += 1
+                    continue
+                sim.write(packet)
+            if stop_after_goal_s is not None:
+                if goal_t is None and sim.summary().get("goal_reached"):
+                    goal_t = sim.time_s
+                if goal_t is not None and sim.time_s - goal_t >= stop_after_goal_s:
+                    break
+        truth = sim.summary()
+        return RunResult(
+            scenario=scenario.name,
+            seed=seed,
+            formulation=scenario.planner.formulation,
+            truth=truth,
+            companion=companion,
+            sim_time_s=sim.time_s,
+            dropped_packets=dropped,
+            extra={"replan_truth": replan_truth},
+            tlog_path=Path(tlog_path) if tlog_path else None,
+        )
+    finally:
+        link.close()
+        sim.close()

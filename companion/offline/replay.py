@@ -1,0 +1,490 @@
+"""Replay a MAVLink tlog through the companion's estimator and planner, in log time.
+
+:func:`replay` reads a tlog (:func:`companion.mavlink.tlog.read_tlog`), feeds every *inbound*
+message (from any source other than the companion's own (system, component), by
+default (1, 191): the autopilot, obstacle systems, a ground station) to a fresh
+:class:`~companion.loop.app.Companion` and calls :meth:`~companion.loop.app.Companion.tick` at the
+link times at which the recorded companion ticked. It reads no clock: a replay takes as
+long as the computation, not the flight.
+
+Two kinds of log
+----------------
+*Compare* (the log holds the companion's own packets, source (1, 191)). The recorded
+ticks are rebuilt from the outbound records: a tick is a run of consecutive outbound
+records with no inbound record between them, ended by its SET_POSITION_TARGET_LOCAL_NED
+(the last message of a streaming tick), and its time is the stamp of its first record.
+Ticks that sent nothing (the companion ticks at ``setpoint_rate_hz`` from its first tick
+on, and a tick that is not streaming and not due a HEARTBEAT sends nothing) are put back
+on the setpoint-rate grid between recorded ticks and after the last one up to the end of
+the log, each after the inbound records stamped up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
+
+*What-if* (no companion packets: mavsim's own ``--tlog``, a MAVProxy or QGroundControl
+log). The companion ticks at its setpoint rate over the log's duration, and since no
+vehicle in such a log ever accepted our OFFBOARD request, the offboard sequence is
+replaced by a stand-in that counts as engaged from the first PX4 HEARTBEAT on: the
+result is what the companion would have commanded, replanning from the vehicle's real
+(logged) state each cycle. The vehicle did not follow those commands, so they are an
+open-loop answer to "what would it have done here", not a prediction of a flight.
+
+Time base
+---------
+The companion runs on *link time*: Unix time on a real link, simulated time in lockstep.
+A lockstep tlog is stamped ``LOCKSTEP_EPOCH_S + simulated time``
+(:data:`companion.mavlink.tlog.LOCKSTEP_EPOCH_S`, see :class:`~companion.mavlink.link.MemoryLink`), so
+the replay subtracts that offset. ``time_offset_s=None`` detects it: a log whose first
+stamp lies within one day after ``LOCKSTEP_EPOCH_S`` (2024-01-01) is a lockstep log;
+otherwise the offset is 0 (pass ``time_offset_s`` to override). Times are handled in
+integer microseconds (the tlog's resolution) and converted as ``us * 1e-6``, the same
+expression ``mavsim`` uses for its clock, so a lockstep log replays with bit-identical
+times and therefore bit-identical commands. For a real-time log the recorded stamps are
+the link's clock when each packet was sent (a few microseconds after the tick's own
+clock reading), so its replay agrees only to that timing.
+
+Comparison. SET_POSITION_TARGET_LOCAL_NED carries float32 velocities, so the replayed
+velocities are rounded to float32 exactly as packing would before they are compared:
+an exact reproduction gives a difference of 0.0, and any real discrepancy shows.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.mavlink import messages
+from companion.loop.app import Companion
+from companion.errors import CompanionError
+from companion.mavlink.link import DEFAULT_SOURCE_COMPONENT, DEFAULT_SOURCE_SYSTEM, Received
+from companion.mavlink.offboard import OffboardConfig, Phase, SequencerState
+from companion.loop.config import load_scenario
+from companion.mavlink.tlog import LOCKSTEP_EPOCH_S, read_tlog
+
+logger = logging.getLogger(__name__)
+
+_SETPOINT = "SET_POSITION_TARGET_LOCAL_NED"
+_US = 1_000_000
+_LOCKSTEP_WINDOW_S = 86_400.0  # a lockstep log's first stamp lies within a day after LOCKSTEP_EPOCH_S
+
+
+class ReplayError(CompanionError, ValueError):
+    """A log cannot be replayed (no vehicle in it, bad arguments); the message names the file."""
+
+
+@dataclass
+class ReplayResult:
+    """What a replay did and how it compares with the recording.
+
+    Attributes
+    ----------
+    path, scenario_path : the tlog and the scenario file.
+    mode : ``"compare"`` (the log holds the companion's commands) or ``"what-if"``.
+    time_offset_s : subtracted from tlog stamps to get link time (s); ``lockstep`` says
+        whether it was detected (or given) as the lockstep epoch.
+    messages, inbound, outbound : valid messages read, fed to the companion, sent by it.
+    duration_s : log time from the first to the last record (s).
+    ticks : ticks replayed (recorded ones plus the silent ones put back on the grid).
+    recorded_ticks : ticks rebuilt from the outbound records.
+    commands_recorded : recorded SET_POSITION_TARGET_LOCAL_NED.
+    commands_compared : recorded setpoints matched with a replayed one of the same tick.
+    unmatched_commands : recorded setpoints the replay did not send, plus setpoints the
+        replay sent at ticks where the recording sent none.
+    tick_mismatches : recorded ticks whose message types differ from the replayed ones,
+        plus silent ticks at which the replay sent something.
+    max_abs_diff_mps : largest absolute difference over axes and compared setpoints (m/s,
+        float32 wire values); None if nothing was compared.
+    max_diff_t_s : link time (s) of the tick with that difference; ``max_diff_index`` its
+        index among the compared setpoints.
+    command_times_s, commands_mps : every replayed setpoint, link time (s) and NED velocity
+        (m/s, float64 as computed) - (K,), (K, 3).
+    recorded_commands_mps : (K, 3) recorded velocity at the same ticks (NaN where none).
+    status_counts : planner status per replan (``optimal``, ``slack``, ``failed``).
+    companion : the replayed :class:`Companion` (records, state) for figures and reports.
+    """
+
+    path: Path
+    scenario_path: Path
+    mode: str
+    time_offset_s: float
+    lockstep: bool
+    messages: int
+    inbound: int
+    outbound: int
+    duration_s: float
+    ticks: int
+    recorded_ticks: int
+    commands_recorded: int
+    commands_compared: int
+    unmatched_commands: int
+    tick_mismatches: int
+    max_abs_diff_mps: float | None
+    max_diff_t_s: float | None
+    max_diff_index: int | None
+    command_times_s: np.ndarray
+    commands_mps: np.ndarray
+    recorded_commands_mps: np.ndarray
+    status_counts: dict
+    companion: Companion
+    notes: list = field(default_factory=list)
+
+    @property
+    def replans(self) -> int:
+        return len(self.companion.records)
+
+    def summary(self) -> dict:
+        """JSON-serialisable numbers (what ``companion replay --json`` prints)."""
+        state = self.companion.state
+        return {
+            "tlog": str(self.path),
+            "scenario": str(self.scenario_path),
+            "mode": self.mode,
+            "time_offset_s": self.time_offset_s,
+            "lockstep": self.lockstep,
+            "messages": self.messages,
+            "inbound": self.inbound,
+            "outbound": self.outbound,
+            "log_duration_s": round(self.duration_s, 6),
+            "ticks": self.ticks,
+            "recorded_ticks": self.recorded_ticks,
+            "replans": self.replans,
+            "plan_status": dict(self.status_counts),
+            "commands_replayed": int(self.command_times_s.size),
+            "commands_recorded": self.commands_recorded,
+            "commands_compared": self.commands_compared,
+            "unmatched_commands": self.unmatched_commands,
+            "tick_mismatches": self.tick_mismatches,
+            "max_abs_diff_mps": self.max_abs_diff_mps,
+            "max_diff_t_s": self.max_diff_t_s,
+            "max_diff_index": self.max_diff_index,
+            "max_commanded_speed_mps": float(np.max(np.linalg.norm(self.commands_mps, axis=1))) if self.commands_mps.size else None,
+            "goal_reached_t_s": state.goal_reached_t_s,
+            "braking_events": state.braking_events,
+            "stale_events": state.stale_events,
+            "messages_rejected": state.messages_rejected,
+            "tracks": len(self.companion.tracker),
+            "events": [(round(t, 3), text) for t, text in state.events],
+            "notes": list(self.notes),
+        }
+
+
+# --------------------------------------------------------------------------- what-if stand-in
+
+
+class AssumeEngaged:
+    """Stand-in for :class:`~companion.mavlink.offboard.OffboardSequencer` in a what-if replay.
+
+    Streams and counts as engaged from the first PX4 autopilot HEARTBEAT on; sends no
+    commands. Used only for logs in which no companion ever asked for OFFBOARD.
+    """
+
+    def __init__(self) -> None:
+        self._target: tuple[int, int] | None = None
+        self._since: float | None = None
+        self.events: list = []
+
+    def on_heartbeat(self, t_s: float, hb: messages.VehicleHeartbeat) -> None:
+        if hb.is_autopilot and self._target is None:
+            self._target, self._since = hb.key, t_s
+
+    def on_ack(self, t_s: float, ack: messages.CommandAck) -> None:
+        """Ignored: nothing was asked."""
+
+    def on_statustext(self, t_s: float, text: str) -> None:
+        """Ignored."""
+
+    def on_home_altitude(self, alt_amsl_m: float) -> None:
+        """Ignored."""
+
+    def step(self, t_s: float) -> list:
+        return []
+
+    @property
+    def target(self) -> tuple[int, int] | None:
+        return self._target
+
+    @property
+    def phase(self) -> Phase:
+        return Phase.ENGAGED if self._target is not None else Phase.WAIT_AUTOPILOT
+
+    @property
+    def state(self) -> SequencerState:
+        engaged = self._target is not None
+        return SequencerState(
+            phase=self.phase, streaming=engaged, engaged=engaged, since_s=self._since, attempts=0,
+            reason="replay what-if: assumed engaged from the first autopilot HEARTBEAT",
+        )
+
+
+# --------------------------------------------------------------------------- log reading
+
+
+@dataclass
+class _Rec:
+    t_us: int  # link time, integer microseconds
+    msg: object
+    raw: bytes
+
+
+@dataclass
+class _Tick:
+    t_us: int
+    recorded: list = field(default_factory=list)  # recorded outbound messages ([] for a silent tick)
+    silent: bool = False
+
+    @property
+    def setpoint(self):
+        return next((m for m in reversed(self.recorded) if m.get_type() == _SETPOINT), None)
+
+
+def _reparse(parser: mavlink2.MAVLink, raw: bytes, fallback):
+    """The message as the companion's link parses it (MAVLink 2 ``common``); ``fallback`` if it cannot."""
+    try:
+        msgs = parser.parse_buffer(raw) or []
+    except Exception:  # robust_parsing should not raise; a log must never stop the replay
+        msgs = []
+    parser.buf = bytearray()
+    parser.buf_index = 0
+    parser.expected_length = mavlink2.HEADER_LEN_V1 + 2
+    good = [m for m in msgs if m.get_type() != "BAD_DATA"]
+    return good[0] if len(good) == 1 else fallback
+
+
+def _has_vehicle(inbound: list[_Rec]) -> bool:
+    for rec in inbound:
+        if rec.msg.get_type() == "HEARTBEAT":
+            hb = messages.decode(rec.msg)
+            if isinstance(hb, messages.VehicleHeartbeat) and hb.is_autopilot:
+                return True
+    return False
+
+
+def _velocity(msg) -> np.ndarray:
+    return np.array([msg.vx, msg.vy, msg.vz], dtype=float)
+
+
+def _wire(v: np.ndarray) -> np.ndarray:
+    """Velocities as SET_POSITION_TARGET_LOCAL_NED carries them (float32)."""
+    return np.asarray(v, dtype=np.float32).astype(float)
+
+
+# --------------------------------------------------------------------------- replay
+
+
+def replay(
+    tlog_path: str | os.PathLike,
+    scenario_path: str | os.PathLike,
+    *,
+    time_offset_s: float | None = None,
+    companion_key: tuple[int, int] = (DEFAULT_SOURCE_SYSTEM, DEFAULT_SOURCE_COMPONENT),
+    assume_engaged: bool | None = None,
+    offboard: OffboardConfig | None = None,
+    **planner_overrides,
+) -> ReplayResult:
+    """Replay a tlog through a fresh companion and compare with its recorded commands.
+
+    Parameters
+    ----------
+    tlog_path : the log (any tlog pymavlink reads: companion, mavsim, MAVProxy, QGC).
+    scenario_path : scenario TOML the companion flew (mission, planner, estimator, map).
+    time_offset_s : seconds subtracted from tlog stamps to get the companion's link time;
+        None detects a lockstep log (offset ``LOCKSTEP_EPOCH_S``) or else uses 0.
+    companion_key : the companion's (system id, component id); its packets are outbound.
+    assume_engaged : replace the offboard sequence with :class:`AssumeEngaged`; None does
+        so exactly when the log holds no companion setpoint (what-if mode).
+    offboard : engagement settings the recorded companion used (default: the scenario's).
+    **planner_overrides : ``[planner]`` overrides the recorded run used (``formulation`` ...).
+
+    Returns
+    -------
+    ReplayResult
+
+    Raises
+    ------
+    TlogError
+        Missing, empty or non-tlog file, or no valid MAVLink message in it.
+    ReplayError
+        No PX4 autopilot HEARTBEAT among the inbound messages, or a bad offset.
+    ConfigError
+        Bad scenario file or override.
+    """
+    path = Path(tlog_path)
+    records = list(read_tlog(path))  # raises TlogError first: a bad log is the likelier mistake
+    scenario = load_scenario(scenario_path, **planner_overrides)
+    first_s, last_s = records[0][0], records[-1][0]
+
+    lockstep = time_offset_s is None and LOCKSTEP_EPOCH_S <= first_s < LOCKSTEP_EPOCH_S + _LOCKSTEP_WINDOW_S
+    if time_offset_s is None:
+        time_offset_s = LOCKSTEP_EPOCH_S if lockstep else 0.0
+    else:
+        lockstep = float(time_offset_s) == LOCKSTEP_EPOCH_S
+    if not math.isfinite(time_offset_s):
+        raise ReplayError(f"time_offset_s must be finite seconds, got {time_offset_s!r}")
+    offset_us = int(round(float(time_offset_s) * _US))
+
+    parser = mavlink2.MAVLink(None, *companion_key)
+    parser.robust_parsing = True
+    key = tuple(int(k) for k in companion_key)
+    stream: list[tuple[bool, _Rec]] = []
+    n_in = n_out = 0
+    for t_s, msg in records:
+        raw = bytes(msg.get_msgbuf())
+        # mavutil stores stamp_us * 1e-6; rounding back recovers the integer exactly.
+        rec = _Rec(int(round(t_s * _US)) - offset_us, _reparse(parser, raw, msg), raw)
+        out = messages.source_key(rec.msg) == key
+        n_out += out
+        n_in += not out
+        stream.append((out, rec))
+    inbound = [r for out, r in stream if not out]
+    if not _has_vehicle(inbound):
+        sources = sorted({messages.source_key(r.msg) for r in inbound if r.msg.get_type() == "HEARTBEAT"})
+        raise ReplayError(
+            f"{path}: no vehicle in the log: no PX4 autopilot HEARTBEAT (component 1, autopilot 12) among "
+            f"{len(inbound)} inbound messages" + (f"; heartbeats only from {sources}" if sources else "; no HEARTBEAT at all")
+        )
+
+    period_us = int(round(_US / scenario.loop.setpoint_rate_hz))  # as the harness advances mavsim: round(dt * 1e6)
+    events = _schedule(stream, period_us)
+    recorded_ticks = sum(1 for ev in events if isinstance(ev, _Tick) and not ev.silent)
+    commands_recorded = sum(1 for ev in events if isinstance(ev, _Tick) and ev.setpoint is not None)
+    mode = "compare" if commands_recorded else "what-if"
+    if assume_engaged is None:
+        assume_engaged = mode == "what-if"
+    notes = []
+    if mode == "compare" and not lockstep:
+        notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
+
+    companion = Companion(scenario, offboard=offboard)
+    if assume_engaged:
+        companion.sequencer = AssumeEngaged()
+        notes.append("offboard sequence assumed engaged from the first autopilot HEARTBEAT (what-if)")
+
+    times, cmds, recs = [], [], []
+    diffs: list[tuple[float, float]] = []  # (max abs diff, t_s)
+    unmatched = mismatches = ticks = 0
+    for ev in events:
+        if isinstance(ev, _Rec):
+            companion.handle(Received(ev.t_us * 1e-6, ev.msg, ev.raw))
+            continue
+        t = ev.t_us * 1e-6
+        out = companion.tick(t)
+        ticks += 1
+        sp = next((m for m in reversed(out) if m.get_type() == _SETPOINT), None)
+        if ev.silent:
+            if mode == "compare":  # the recorded companion sent nothing at this tick
+                mismatches += bool(out)
+                unmatched += sp is not None
+        elif [m.get_type() for m in out] != [m.get_type() for m in ev.recorded]:
+            mismatches += 1
+        rec_sp = ev.setpoint
+        if sp is not None:
+            v = _velocity(sp)
+            times.append(t)
+            cmds.append(v)
+            recs.append(_velocity(rec_sp) if rec_sp is not None else np.full(3, np.nan))
+            if rec_sp is not None:
+                diffs.append((float(np.max(np.abs(_wire(v) - _velocity(rec_sp)))), t))
+            elif not ev.silent:
+                unmatched += 1
+        elif rec_sp is not None:
+            unmatched += 1
+
+    if diffs:
+        i_max = int(np.argmax([d for d, _ in diffs]))
+        max_diff, max_t = diffs[i_max]
+    else:
+        i_max, max_diff, max_t = None, None, None
+    statuses: dict[str, int] = {}
+    for r in companion.records:
+        statuses[r.status] = statuses.get(r.status, 0) + 1
+    result = ReplayResult(
+        path=path,
+        scenario_path=Path(scenario_path),
+        mode=mode,
+        time_offset_s=float(time_offset_s),
+        lockstep=lockstep,
+        messages=len(records),
+        inbound=n_in,
+        outbound=n_out,
+        duration_s=float(last_s - first_s),
+        ticks=ticks,
+        recorded_ticks=recorded_ticks,
+        commands_recorded=commands_recorded,
+        commands_compared=len(diffs),
+        unmatched_commands=unmatched,
+        tick_mismatches=mismatches,
+        max_abs_diff_mps=max_diff,
+        max_diff_t_s=max_t,
+        max_diff_index=i_max,
+        command_times_s=np.array(times, dtype=float),
+        commands_mps=np.array(cmds, dtype=float).reshape(-1, 3),
+        recorded_commands_mps=np.array(recs, dtype=float).reshape(-1, 3),
+        status_counts=statuses,
+        companion=companion,
+        notes=notes,
+    )
+    logger.info(
+        "replayed %s (%s): %d messages, %d ticks, %d replans, %d commands compared, max diff %s m/s",
+        path, mode, result.messages, ticks, result.replans, result.commands_compared, max_diff,
+    )
+    return result
+
+
+def _schedule(stream: list[tuple[bool, _Rec]], period_us: int) -> list:
+    """Inbound records and ticks in the order the recorded companion saw them.
+
+    Recorded ticks sit where their first outbound record is; silent ticks are put on the
+    setpoint grid between recorded ticks and after the last one up to the last record's
+    time (or over the whole log when none was recorded), each after every inbound record
+    stamped up to its time.
+    """
+    events: list = []
+    cur: _Tick | None = None
+    for out, rec in stream:
+        if not out:
+            cur = None
+            events.append(rec)
+            continue
+        if cur is None or cur.setpoint is not None or abs(rec.t_us - cur.t_us) > period_us // 2:
+            cur = _Tick(rec.t_us)
+            events.append(cur)
+        cur.recorded.append(rec.msg)
+
+    ticks = [ev for ev in events if isinstance(ev, _Tick)]
+    if not ticks:
+        inbound = [ev for ev in events if isinstance(ev, _Rec)]
+        t0, t1 = inbound[0].t_us, inbound[-1].t_us
+        grid = deque(t0 + k * period_us for k in range(1, (t1 - t0) // period_us + 1))
+        return _merge(events, {None: grid}, period_us)
+    gaps = {}
+    for a, b in zip(ticks, ticks[1:]):
+        silent, t = deque(), a.t_us + period_us
+        while t < b.t_us - period_us // 2:
+            silent.append(t)
+            t += period_us
+        gaps[id(a)] = silent
+    # After the last recorded tick the companion kept ticking silently up to the end of the log.
+    end_us = max(ev.t_us for ev in events)
+    gaps[id(ticks[-1])] = deque(range(ticks[-1].t_us + period_us, end_us + 1, period_us))
+    return _merge(events, gaps, period_us)
+
+
+def _merge(events: list, gaps: dict, period_us: int) -> list:
+    """Insert silent ticks: ``gaps[id(tick)]`` follow that tick (``gaps[None]``: from the start)."""
+    out: list = []
+    pending: deque = gaps.get(None, deque())
+    for ev in events:
+        if isinstance(ev, _Tick):
+            out.extend(_Tick(t, silent=True) for t in pending)
+            out.append(ev)
+            pending = gaps.get(id(ev), deque())
+            continue
+        while pending and ev.t_us > pending[0]:
+            out.append(_Tick(pending.popleft(), silent=True))
+        out.append(ev)
+    out.extend(_Tick(t, silent=True) for t in pending)  # grid points after the last record, up to its time
+    return out

@@ -1,0 +1,114 @@
+"""Run reports: the numbers a person reads after a flight, from the companion's records and the truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from companion.loop.app import Companion
+
+_FAILSAFE_WORDS = ("braking", "stale", "PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP", "slack used")
+
+
+def companion_report(companion: Companion) -> dict:
+    """What the companion itself saw and did (no ground truth needed).
+
+    Contours of touch are confidences in [0, 1]; ``min_realised_contour`` is computed from
+    the estimates at each replan, ``min_planned_contour`` from the plans (obstacles in
+    sensing range only). Solve times in milliseconds.
+    """
+    records = companion.records
+    solve = np.array([r.solve_time_s for r in records]) if records else np.zeros(0)
+    realised = [min(r.realised_contour.values()) for r in records if r.realised_contour]
+    planned = [r.planned_min_contour for r in records if math.isfinite(r.planned_min_contour)]
+    statuses: dict[str, int] = {}
+    for r in records:
+        statuses[r.status] = statuses.get(r.status, 0) + 1
+    state = companion.state
+    return {
+        "formulation": companion.cfg.formulation,
+        "c_min": companion.cfg.c_min,
+        "c_max": companion.cfg.c_max,
+        "engaged": companion.sequencer.state.engaged,
+        "phase": companion.sequencer.phase.name,
+        "goal_reached_companion_t_s": state.goal_reached_t_s,
+        "replans": len(records),
+        "plan_status": statuses,
+        "replans_with_slack": state.slack_plans,
+        "failed_plans": state.failed_plans,
+        "min_realised_contour": min(realised) if realised else None,
+        "min_planned_contour": min(planned) if planned else None,
+        "solve_time_median_ms": float(np.median(solve) * 1e3) if solve.size else None,
+        "solve_time_p99_ms": float(np.percentile(solve, 99) * 1e3) if solve.size else None,
+        "stale_events": state.stale_events,
+        "messages_rejected": state.messages_rejected,
+        "obstacle_reports_rejected": state.obstacle_rejections,
+        "tracks": len(companion.tracker),
+        "failsafe_events": [(round(t, 2), text) for t, text in state.events if any(w in text for w in _FAILSAFE_WORDS)],
+        "events": [(round(t, 2), text) for t, text in state.events],
+    }
+
+
+def truth_report(truth: dict) -> dict:
+    """The simulator's ground truth in report form: collisions, distances (m), goal, final mode."""
+    dist = truth.get("min_distance_m", {}) or {}
+    clear = truth.get("min_clearance_m", {}) or {}
+    walls = truth.get("min_wall_clearance_m") or []
+    return {
+        "scenario": truth.get("scenario"),
+        "collided": bool(truth.get("collided")),
+        "collisions": len(truth.get("collisions", [])),
+        "goal_reached": bool(truth.get("goal_reached")),
+        "time_to_goal_s": truth.get("time_to_goal_s"),
+        "min_true_distance_m": min(dist.values()) if dist else None,
+        "min_true_clearance_m": min(clear.values()) if clear else None,
+        "min_wall_clearance_m": min(walls) if walls else None,
+        "final_mode": truth.get("final_mode"),
+        "sim_time_s": truth.get("sim_time_s"),
+    }
+
+
+def run_report(companion: Companion, truth: dict | None) -> dict:
+    """Companion report plus the simulator's ground truth (collisions, distances, goal), if any."""
+    return {**(truth_report(truth) if truth else {}), **companion_report(companion)}
+
+
+def _fmt(value: object) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def format_report(report: dict) -> str:
+    """A short human-readable summary (one 'key: value' line each; events listed last)."""
+    order = [
+        ("scenario", "scenario"),
+        ("formulation", "formulation"),
+        ("c_min", "c_min"),
+        ("c_max", "c_max"),
+        ("collided", "collision"),
+        ("goal_reached", "goal reached"),
+        ("time_to_goal_s", "time to goal [s]"),
+        ("min_true_distance_m", "smallest true distance [m]"),
+        ("min_true_clearance_m", "smallest true clearance (distance - radii) [m]"),
+        ("min_wall_clearance_m", "smallest wall clearance [m]"),
+        ("min_realised_contour", "smallest realised contour of touch (estimates)"),
+        ("min_planned_contour", "smallest planned contour of touch"),
+        ("replans", "replans"),
+        ("solve_time_median_ms", "planner solve time median [ms]"),
+        ("solve_time_p99_ms", "planner solve time p99 [ms]"),
+        ("replans_with_slack", "replans that used safety slack"),
+        ("failed_plans", "failed plans"),
+        ("stale_events", "stale-estimate events"),
+        ("final_mode", "final mode"),
+    ]
+    width = max(len(label) for _, label in order)
+    lines = [f"{label.ljust(width)}  {_fmt(report.get(key))}" for key, label in order if key in report]
+    fs = report.get("failsafe_events") or []
+    lines.append(f"{'failsafe events'.ljust(width)}  {len(fs)}")
+    for t, text in fs:
+        lines.append(f"  t={t:7.2f} s  {text}")
+    return "\n".join(lines)

@@ -1,0 +1,169 @@
+"""The planner end to end: scenario 1 of the paper, bounds, sensing range, status, warm start.
+
+Safety figures are recomputed here with the overlap module on the returned positions
+(never taken from the plan or the linearisation).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from companion.core import overlap
+from companion.errors import InputError
+from companion.core.planner import Plan, Planner, PlannerConfig, PlanRequest
+
+S = 0.02 * np.eye(3)
+START = np.array([0.0, 0.0, -5.0])
+GOAL = np.array([10.0, 0.0, -5.0])
+
+
+def scenario_one(formulation: str = "hyperplane", **overrides) -> tuple[PlannerConfig, PlanRequest]:
+    """SPEC section 7 scenario 1 (as in configs/single_obstacle.toml): head-on, 0.5 m radii."""
+    n = 20
+    kwargs = dict(formulation=formulation, horizon_steps=n, step_s=1.0, c_min=0.6, velocity_max_mps=(3.0, 3.0, 1.0),
+                  accel_max_mps2=(0.5, 0.5, 0.5), drone_radius_m=0.5, sensing_range_m=20.0)
+    kwargs.update(overrides)
+    cfg = PlannerConfig(**kwargs)
+    t = np.arange(1, n + 1)[:, None]
+    means = np.array([10.0, 0.0, -5.0]) + t * np.array([-0.5, 0.0, 0.0])
+    req = PlanRequest(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (n, 3, 3)), target=GOAL,
+                      obstacle_means=means[None], obstacle_covs=np.broadcast_to(S, (1, n, 3, 3)), obstacle_radii=[0.5])
+    return cfg, req
+
+
+def exact_contour(req: PlanRequest, plan: Plan, drone_radius: float) -> np.ndarray:
+    return overlap.contour_of_touch(plan.positions[None], req.drone_covs[None], req.obstacle_means,
+                                    req.obstacle_covs, req.obstacle_radii[:, None] + drone_radius)
+
+
+@pytest.mark.parametrize("formulation", ["hyperplane", "paper"])
+def test_that_scenario_one_reaches_the_goal_with_the_60_percent_contours_apart(formulation):
+    cfg, req = scenario_one(formulation)
+    plan = Planner(cfg).solve(req)
+    assert plan.status == "optimal", plan.notes
+    assert np.linalg.norm(plan.positions[-1] - GOAL) <= 0.1
+    contour = exact_contour(req, plan, cfg.drone_radius_m)
+    assert contour.min() >= 0.599
+    np.testing.assert_allclose(plan.contour_of_touch, contour, atol=1e-9)
+    # the constraint is active: the plan does not detour more than needed
+    assert contour.min() <= 0.65
+    assert plan.slack_max <= 1e-4
+
+
+@pytest.mark.parametrize("formulation", ["deterministic", "bhattacharyya"])
+def test_that_baselines_solve_scenario_one_under_their_own_constraint(formulation):
+    cfg, req = scenario_one(formulation)
+    plan = Planner(cfg).solve(req)
+    assert plan.status == "optimal", plan.notes
+    assert np.linalg.norm(plan.positions[-1] - GOAL) <= 0.1
+    gap = np.linalg.norm(req.obstacle_means[0] - plan.positions, axis=1) - 1.0
+    assert gap.min() >= -1e-3                      # bodies never touch
+    if formulation == "deterministic":
+        assert exact_contour(req, plan, 0.5).min() < 0.1   # means only: the contours interpenetrate
+
+
+def test_that_without_obstacles_the_plan_goes_straight_to_the_goal_within_bounds():
+    cfg = PlannerConfig(horizon_steps=20, step_s=0.5, c_min=0.9, velocity_max_mps=(2.0, 2.0, 1.0),
+                        accel_max_mps2=(1.0, 1.0, 0.5))
+    target = np.array([8.0, -4.0, -6.0])
+    req = PlanRequest(position=START, velocity=np.array([0.5, 0.0, 0.0]), drone_covs=np.broadcast_to(S, (20, 3, 3)),
+                      target=target)
+    plan = Planner(cfg).solve(req)
+    assert plan.status == "optimal"
+    assert np.linalg.norm(plan.positions[-1] - target) <= 0.05
+    tol = 1e-4
+    assert np.all(np.abs(plan.velocities) <= cfg.velocity_max + tol)
+    accel = np.diff(np.vstack([req.velocity, plan.velocities]), axis=0) / cfg.step_s
+    assert np.all(np.abs(accel) <= cfg.accel_max + tol)
+    # holonomic model: p_i = p_{i-1} + tau V_i
+    np.testing.assert_allclose(plan.positions, START + cfg.step_s * np.cumsum(plan.velocities, axis=0), atol=1e-6)
+    # straight: every position lies close to the segment start -> target (the initial
+    # velocity bends the first steps a little)
+    u = (target - START) / np.linalg.norm(target - START)
+    rel = plan.positions - START
+    off_line = np.linalg.norm(rel - np.outer(rel @ u, u), axis=1)
+    assert off_line.max() <= 0.5
+    assert plan.eta.shape == (0, 20) and plan.wall_margin.shape == (0, 20)
+
+
+def test_that_an_unavoidable_obstacle_is_never_reported_optimal():
+    # an obstacle sits on the drone and follows it: no plan keeps 60 % contours apart
+    cfg, _ = scenario_one()
+    n = 20
+    means = np.broadcast_to(START + np.array([0.3, 0.0, 0.0]), (1, n, 3))
+    req = PlanRequest(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (n, 3, 3)), target=GOAL,
+                      obstacle_means=means, obstacle_covs=np.broadcast_to(S, (1, n, 3, 3)), obstacle_radii=[0.5])
+    plan = Planner(cfg).solve(req)
+    assert plan.status in ("slack", "failed")
+    assert plan.status == "slack" and plan.slack_max > 0.1
+    assert plan.contour_of_touch[0, 0] < 0.6
+    assert np.all(np.isfinite(plan.velocities))
+
+
+def test_that_obstacles_beyond_sensing_range_are_ignored():
+    cfg, req = scenario_one(sensing_range_m=5.0)          # obstacle starts 9.5 m away
+    plan = Planner(cfg).solve(req)
+    assert not plan.in_range[0]
+    assert plan.status == "optimal"
+    assert np.abs(plan.positions[:, 1]).max() < 0.1       # flies through as if it were not there
+    assert plan.min_contour_of_touch == 1.0               # only in-range obstacles count
+
+
+def test_that_a_warm_started_replan_reuses_the_solver_and_agrees():
+    cfg, req = scenario_one()
+    planner = Planner(cfg)
+    first = planner.solve(req)
+    qp = planner._qps[(20, 1, 0)][1]
+    again = planner.solve(req, warm_start=first)
+    assert planner._qps[(20, 1, 0)][1] is qp              # set up once per shape, updated in place
+    assert again.status == "optimal"
+    assert np.linalg.norm(again.positions[-1] - GOAL) <= 0.1
+
+
+def test_that_a_request_of_the_wrong_horizon_is_rejected():
+    cfg, _ = scenario_one()
+    req = PlanRequest(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (5, 3, 3)), target=GOAL)
+    with pytest.raises(InputError, match="request has 5 steps, the planner is configured for horizon_steps = 20"):
+        Planner(cfg).solve(req)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        ("position", [0.0, 0.0], r"position has shape \(2,\), expected \(3\)"),
+        ("target", [0.0, np.nan, 0.0], "target contains NaN"),
+        ("drone_covs", np.broadcast_to(-S, (4, 3, 3)), "drone_covs.* not positive definite"),
+    ],
+)
+def test_that_bad_requests_get_clear_errors(field, value, match):
+    kwargs = dict(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (4, 3, 3)), target=GOAL)
+    kwargs[field] = value
+    with pytest.raises(InputError, match=match):
+        PlanRequest(**kwargs)
+
+
+def test_that_the_plan_solve_time_is_a_diagnostic_only():
+    cfg, req = scenario_one()
+    a, b = Planner(cfg).solve(req), Planner(cfg).solve(req)
+    np.testing.assert_array_equal(a.velocities, b.velocities)   # deterministic, whatever the clock says
+    assert a.solve_time_s > 0.0
+
+
+@pytest.mark.parametrize("formulation", ["hyperplane", "paper"])
+def test_that_a_cold_plan_does_not_depend_on_what_the_planner_solved_before(formulation):
+    """A plan without warm start is a function of its request: OSQP's duals restart at zero and
+    its step size ``rho`` at ``solver_rho``, whatever the previous solves left behind."""
+    cfg, req = scenario_one(formulation)
+    fresh = Planner(cfg).solve(req)
+    used = Planner(cfg)
+    _, other = scenario_one(formulation)
+    other = PlanRequest(position=START + np.array([0.0, 1.5, 0.5]), velocity=np.array([1.0, -0.5, 0.0]),
+                        drone_covs=other.drone_covs, target=GOAL + np.array([0.0, -3.0, 0.0]),
+                        obstacle_means=other.obstacle_means + np.array([0.0, 0.3, 0.0]),
+                        obstacle_covs=other.obstacle_covs, obstacle_radii=other.obstacle_radii)
+    previous = used.solve(other)
+    used.solve(other, warm_start=previous)
+    again = used.solve(req)
+    np.testing.assert_array_equal(again.velocities, fresh.velocities)
+    assert again.iterations == fresh.iterations

@@ -1,0 +1,273 @@
+"""OffboardSequencer driven by scripted heartbeats, ACKs and STATUSTEXT, as PX4 behaves."""
+
+import math
+
+import pytest
+
+from companion.mavlink import px4
+from companion.errors import ConfigError
+from companion.mavlink.messages import CommandAck, VehicleHeartbeat
+from companion.mavlink.offboard import Notify, OffboardConfig, OffboardSequencer, Phase, SendCommand
+
+BASE = {px4.OFFBOARD: 145, px4.POSCTL: 209, px4.AUTO_LOITER: 157, px4.AUTO_TAKEOFF: 157, px4.AUTO_RTL: 157}
+
+
+def hb(custom_mode=px4.POSCTL, armed=True, key=(1, 1), autopilot=12):
+    base = BASE.get(custom_mode, 1) if armed else BASE.get(custom_mode, 129) & ~128
+    return VehicleHeartbeat(sysid=key[0], compid=key[1], autopilot=autopilot, type=2, base_mode=base,
+                            custom_mode=custom_mode, system_status=4 if armed else 3, armed=armed,
+                            mode=px4.mode_name(custom_mode) if autopilot == 12 else "",
+                            is_autopilot=px4.is_autopilot_heartbeat(*key, autopilot, 2))
+
+
+def ack(command, result, key=(1, 1)):
+    return CommandAck(key=key, command=command, result=result, target_system=1, target_component=191)
+
+
+def commands(actions):
+    return [a.msg for a in actions if isinstance(a, SendCommand)]
+
+
+def events(actions):
+    return [a.event for a in actions if isinstance(a, Notify)]
+
+
+class Script:
+    """Runs the sequencer at 20 Hz with 1 Hz heartbeats from a scripted vehicle mode."""
+
+    def __init__(self, config, mode=px4.POSCTL, armed=True):
+        self.seq = OffboardSequencer(config)
+        self.mode, self.armed, self.t = mode, armed, 0.0
+        self.sent = []
+        self.heartbeats = True
+
+    def run(self, duration_s, on_command=None):
+        end = self.t + duration_s
+        while self.t < end - 1e-9:
+            if self.heartbeats and abs(self.t - round(self.t)) < 1e-6:
+                self.seq.on_heartbeat(self.t, hb(self.mode, self.armed))
+            for msg in commands(self.seq.step(self.t)):
+                self.sent.append((self.t, msg))
+                if on_command:
+                    on_command(self, msg)
+            self.t = round(self.t + 0.05, 6)
+        return self.seq.state
+
+
+def test_that_a_cooperative_vehicle_is_engaged_after_prestream_and_heartbeat_confirmation():
+    def vehicle(s, msg):
+        if msg.command == 176 and msg.param2 == 6:
+            s.seq.on_ack(s.t, ack(176, 0))
+            s.mode = px4.OFFBOARD
+
+    s = Script(OffboardConfig())
+    state = s.run(0.5)
+    assert state.phase is Phase.PRESTREAM and state.streaming and not state.engaged
+    state = s.run(3.0, vehicle)
+    assert state.phase is Phase.ENGAGED and state.engaged and state.streaming
+    (t_req, req), = s.sent
+    assert t_req == pytest.approx(1.0)
+    assert (req.command, req.param1, req.param2, req.param3, req.target_system) == (176, 129.0, 6.0, 0.0, 1)
+
+
+def test_that_ack_zero_without_mode_change_is_not_engagement_and_is_retried_then_given_up():
+    def px4_without_stream(s, msg):  # real PX4: ACK 0, mode unchanged, STATUSTEXT
+        s.seq.on_ack(s.t, ack(msg.command, 0))
+        s.seq.on_statustext(s.t, "Switching to Offboard is currently not available")
+
+    cfg = OffboardConfig(max_retries=3)
+    s = Script(cfg)
+    state = s.run(3.0, px4_without_stream)
+    assert state.phase is Phase.REQUEST_OFFBOARD and not state.engaged
+    state = s.run(5.0, px4_without_stream)
+    assert state.phase is Phase.GAVE_UP and not state.streaming
+    assert [m.command for _, m in s.sent] == [176] * 4
+    assert [m.confirmation for _, m in s.sent] == [0, 1, 2, 3]
+    texts = [e.text for e in s.seq.events]
+    assert any("currently not available" in t for t in texts)
+    assert "no confirmation after 4 attempts" in texts[-1]
+
+
+def test_that_duplicated_acks_are_counted_once():
+    def double_ack(s, msg):
+        s.seq.on_ack(s.t, ack(176, 0))
+        s.seq.on_ack(s.t, ack(176, 0))
+
+    s = Script(OffboardConfig())
+    s.run(1.5, double_ack)
+    acked = [e for e in s.seq.events if "acknowledged" in e.text]
+    assert len(acked) == 1
+
+
+def test_that_ack_temporarily_rejected_is_retried_and_a_later_mode_change_engages():
+    def older_px4(s, msg):
+        if msg.confirmation == 0:
+            s.seq.on_ack(s.t, ack(176, 1))
+        else:
+            s.mode = px4.OFFBOARD
+
+    s = Script(OffboardConfig())
+    state = s.run(4.0, older_px4)
+    assert state.phase is Phase.ENGAGED
+    assert len(s.sent) == 2
+    assert any("refused (MAV_RESULT_TEMPORARILY_REJECTED)" in e.text for e in s.seq.events)
+
+
+def test_that_unsupported_command_gives_up_at_once():
+    s = Script(OffboardConfig())
+    s.run(1.5, lambda s, m: s.seq.on_ack(s.t, ack(176, 3)))
+    assert s.seq.phase is Phase.GAVE_UP
+
+
+def test_that_acks_from_other_systems_or_for_other_commands_are_ignored():
+    s = Script(OffboardConfig())
+    s.run(1.5, lambda s, m: (s.seq.on_ack(s.t, ack(176, 3, key=(101, 0))), s.seq.on_ack(s.t, ack(400, 3))))
+    assert s.seq.phase is Phase.REQUEST_OFFBOARD
+
+
+def test_that_pilot_takeover_stops_streaming_and_is_not_fought():
+    s = Script(OffboardConfig(), mode=px4.OFFBOARD)
+    assert s.run(0.1).phase is Phase.ENGAGED
+    s.mode = px4.POSCTL
+    state = s.run(5.0)
+    assert state.phase is Phase.PILOT_TOOK_OVER and not state.streaming and not state.engaged
+    assert s.sent == []
+    (ev,) = [e for e in s.seq.events if e.phase is Phase.PILOT_TOOK_OVER]
+    assert "left OFFBOARD for POSCTL" in ev.text and ev.severity == 4
+
+
+def test_that_reengage_requests_offboard_again_after_the_vehicle_falls_back_to_hold():
+    s = Script(OffboardConfig(reengage=True), mode=px4.OFFBOARD)
+    s.run(0.1)
+    s.mode = px4.AUTO_LOITER
+    state = s.run(1.0)
+    assert state.phase is Phase.PRESTREAM and state.streaming
+    s.run(2.0, lambda s, m: setattr(s, "mode", px4.OFFBOARD))
+    assert s.seq.phase is Phase.ENGAGED and len(s.sent) == 1
+
+
+def test_that_heartbeat_loss_stops_commanding_and_recovery_resumes_only_in_offboard():
+    s = Script(OffboardConfig(), mode=px4.OFFBOARD)
+    s.run(0.1)
+    s.heartbeats = False
+    state = s.run(3.5)
+    assert state.phase is Phase.LINK_LOST and not state.streaming
+    s.heartbeats = True
+    assert s.run(1.0).phase is Phase.ENGAGED  # PX4 still in OFFBOARD: never left our control
+
+    s.heartbeats = False
+    s.run(4.0)
+    s.heartbeats, s.mode = True, px4.AUTO_RTL  # PX4's setpoint-loss failsafe fired meanwhile
+    state = s.run(3.0)
+    assert state.phase is Phase.PILOT_TOOK_OVER and s.sent == []
+
+
+def test_that_heartbeat_loss_before_engagement_resumes_the_sequence():
+    s = Script(OffboardConfig(), mode=px4.POSCTL)
+    s.run(0.5)
+    s.heartbeats = False
+    s.run(4.0)
+    assert s.seq.phase is Phase.LINK_LOST
+    s.heartbeats = True
+    s.run(0.6)  # next heartbeat at t = 5 s
+    assert s.seq.phase is Phase.PRESTREAM
+
+
+def test_that_without_arm_the_sequencer_waits_for_the_pilot_to_arm():
+    s = Script(OffboardConfig(), armed=False)
+    state = s.run(10.0)
+    assert state.phase is Phase.WAIT_ARMED and not state.streaming and s.sent == []
+    s.armed = True
+    assert s.run(0.5).phase is Phase.PRESTREAM
+
+
+def test_that_arming_is_retried_while_denied_after_boot_then_confirmed_from_heartbeat():
+    def vehicle(s, msg):
+        if msg.command == 400:
+            if s.t < 2.5:  # "Arming denied: Resolve system health failures first"
+                s.seq.on_ack(s.t, ack(400, 1))
+                s.seq.on_statustext(s.t, "Arming denied: Resolve system health failures first")
+            else:
+                s.seq.on_ack(s.t, ack(400, 0))
+                s.armed = True
+        elif msg.command == 176:
+            s.mode = px4.OFFBOARD
+
+    s = Script(OffboardConfig(arm=True), armed=False)
+    state = s.run(8.0, vehicle)
+    assert state.phase is Phase.ENGAGED
+    cmds = [m.command for _, m in s.sent]
+    assert cmds == [400, 400, 400, 400, 176]
+    assert all(m.param1 == 1.0 for _, m in s.sent[:4])
+
+
+def test_that_arming_gives_up_after_max_retries():
+    s = Script(OffboardConfig(arm=True, max_retries=2), armed=False)
+    state = s.run(6.0, lambda s, m: s.seq.on_ack(s.t, ack(400, 1)))
+    assert state.phase is Phase.GAVE_UP and len(s.sent) == 3
+
+
+def test_that_takeoff_waits_for_auto_loiter_before_prestreaming():
+    def vehicle(s, msg):
+        if msg.command == 400:
+            s.armed = True
+        elif msg.command == 22:
+            s.seq.on_ack(s.t, ack(22, 0))
+            s.mode = px4.AUTO_TAKEOFF
+
+    cfg = OffboardConfig(arm=True, takeoff_alt_m=5.0)
+    s = Script(cfg, armed=False)
+    s.seq.on_home_altitude(488.0)
+    state = s.run(4.0, vehicle)
+    assert state.phase is Phase.TAKEOFF and not state.streaming
+    (_, to), = [(t, m) for t, m in s.sent if m.command == 22]
+    assert to.param7 == pytest.approx(493.0)
+    s.mode = px4.AUTO_LOITER
+    assert s.run(0.5, vehicle).phase is Phase.PRESTREAM
+
+
+def test_that_takeoff_without_home_altitude_lets_px4_choose():
+    s = Script(OffboardConfig(takeoff_alt_m=2.5), armed=True)
+    s.run(0.1)
+    (_, to), = s.sent
+    assert to.command == 22 and math.isnan(to.param7)
+    assert any("MIS_TAKEOFF_ALT" in e.text for e in s.seq.events)
+
+
+def test_that_takeoff_times_out():
+    s = Script(OffboardConfig(takeoff_alt_m=2.5, takeoff_timeout_s=5.0), armed=True)
+    s.run(8.0, lambda s, m: s.seq.on_ack(s.t, ack(22, 0)))
+    assert s.seq.phase is Phase.GAVE_UP and len(s.sent) == 1
+
+
+def test_that_disarm_during_the_request_returns_to_waiting():
+    s = Script(OffboardConfig())
+    s.run(1.5)
+    assert s.seq.phase is Phase.REQUEST_OFFBOARD
+    s.armed = False
+    assert s.run(1.0).phase is Phase.WAIT_ARMED
+
+
+def test_that_obstacle_and_companion_heartbeats_do_not_start_the_sequence():
+    seq = OffboardSequencer()
+    seq.on_heartbeat(0.0, hb(0, armed=False, key=(101, 0), autopilot=8))
+    seq.on_heartbeat(0.0, hb(0, armed=False, key=(1, 191), autopilot=8))
+    assert seq.step(0.0) == [] and seq.phase is Phase.WAIT_AUTOPILOT and seq.target is None
+
+
+def test_that_every_transition_is_reported_as_an_event():
+    s = Script(OffboardConfig(), mode=px4.OFFBOARD)
+    s.run(0.1)
+    s.mode = px4.POSCTL
+    s.run(1.0)
+    phases = [e.phase for e in s.seq.events]
+    assert phases == [Phase.PRESTREAM, Phase.ENGAGED, Phase.PILOT_TOOK_OVER]
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"prestream_s": -1.0}, {"retry_period_s": 0.0}, {"max_retries": -1}, {"takeoff_alt_m": float("nan")},
+               {"heartbeat_timeout_s": float("inf")}],
+)
+def test_that_invalid_config_is_refused(kwargs):
+    with pytest.raises(ConfigError, match="offboard config"):
+        OffboardConfig(**kwargs)

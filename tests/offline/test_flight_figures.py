@@ -1,0 +1,81 @@
+"""Flight figures: produced from demo and replay runs, robust to empty runs; the ellipse is the c_min slice."""
+
+import numpy as np
+import pytest
+
+from companion.loop.app import Companion
+from companion.cli import main
+from companion.offline.harness import run_lockstep
+from companion.core.overlap import touch_radius
+from companion.plots.flight_figures import slice_ellipse, write_flight_figures
+from companion.loop.config import load_scenario
+
+SCENARIO = "configs/antipodal.toml"
+NAMES = ["topview.png", "contour.png", "speed_accel.png", "solve_time.png"]
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    path = tmp_path_factory.mktemp("figs") / "run.tlog"
+    return run_lockstep(SCENARIO, seed=0, tlog_path=path, duration_s=12)
+
+
+def _check(paths, out_dir, min_bytes=10_000):
+    for p in paths:
+        assert p.parent == out_dir and p.exists()
+        data = p.read_bytes()
+        assert data[:8] == PNG
+        assert min_bytes < len(data) < 400_000, (p.name, len(data))
+
+
+def test_that_a_demo_run_gives_four_plausible_pngs(run, tmp_path):
+    paths = write_flight_figures(run.companion, tmp_path / "out", truth=run.truth)
+    assert [p.name for p in paths] == NAMES
+    _check(paths, tmp_path / "out")
+
+
+def test_that_a_prefix_names_the_files(run, tmp_path):
+    paths = write_flight_figures(run.companion, tmp_path, prefix="antipodal_")
+    assert [p.name for p in paths] == ["antipodal_" + n for n in NAMES]
+
+
+def test_that_replay_plot_writes_the_same_figures(run, tmp_path, capsys):
+    assert main(["replay", str(run.tlog_path), "--scenario", SCENARIO, "--plot", str(tmp_path / "plots")]) == 0
+    assert "figure: " in capsys.readouterr().out
+    _check([tmp_path / "plots" / n for n in NAMES], tmp_path / "plots")
+
+
+@pytest.mark.parametrize("config", ["configs/antipodal.toml", "configs/corridor.toml"])
+def test_that_a_run_without_replans_or_obstacles_still_gives_figures(tmp_path, config):
+    companion = Companion(load_scenario(config))  # never ticked: no records, no tracks
+    paths = write_flight_figures(companion, tmp_path, truth=None)
+    assert [p.name for p in paths] == NAMES
+    assert all(p.exists() and p.stat().st_size > 1000 for p in paths)
+
+
+def test_that_the_ellipse_of_a_diagonal_covariance_has_sigma_times_the_touch_radius():
+    cov = np.diag([0.04, 0.01, 0.09])  # sigma north 0.2, east 0.1, down 0.3
+    w, h, angle = slice_ellipse(cov, 0.9)
+    r = touch_radius(0.9, 3)
+    axes = {round(w, 12), round(h, 12)}
+    assert axes == {round(2 * r * 0.1, 12), round(2 * r * 0.2, 12)}
+    # the longer axis points north (vertical in the plot: angle 90 deg modulo 180)
+    long_angle = angle if w > h else angle + 90.0
+    assert np.isclose(np.cos(np.radians(long_angle)), 0.0, atol=1e-9)
+
+
+def test_that_the_ellipse_is_the_horizontal_slice_of_the_correlated_ellipsoid():
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(3, 3))
+    cov = a @ a.T + 0.1 * np.eye(3)
+    c = 0.9
+    w, h, angle = slice_ellipse(cov, c)
+    r = touch_radius(c, 3)
+    inv = np.linalg.inv(cov)
+    th = np.radians(angle)
+    for s in np.linspace(0, 2 * np.pi, 17):
+        east = 0.5 * w * np.cos(s) * np.cos(th) - 0.5 * h * np.sin(s) * np.sin(th)
+        north = 0.5 * w * np.cos(s) * np.sin(th) + 0.5 * h * np.sin(s) * np.cos(th)
+        d = np.array([north, east, 0.0])  # NED offset on the boundary, in the horizontal plane
+        assert d @ inv @ d == pytest.approx(r**2, rel=1e-9)
