@@ -152,6 +152,14 @@ class ObstacleTracker:
         self._counts["tracks_dropped"] += len(stale)
         return stale
 
+    def drop(self, key: Hashable) -> bool:
+        """Forget track ``key`` (its source restarted); True if there was one."""
+        if self._tracks.pop(key, None) is None:
+            return False
+        self._counts["tracks_dropped"] += 1
+        logger.info("track %r: dropped on request", key)
+        return True
+
     def predict(self, key: Hashable, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Predicted position of track ``key`` at absolute times.
 

@@ -43,6 +43,8 @@ def _finite_int(x: float) -> int | None:
     return int(x) if math.isfinite(x) and abs(x) < 2**31 else None
 
 
+MSG_GPS_GLOBAL_ORIGIN = 49
+
 class Autopilot:
     """Message handling and telemetry streams of system 1, component 1.
 
@@ -154,7 +156,10 @@ class Autopilot:
         elif command in (512, 520):  # REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES
             msg_id = MSG_AUTOPILOT_VERSION if command == 520 else _finite_int(p[0])
             reply = None
-            if msg_id is not None and (msg_id in self._default_us or msg_id == MSG_AUTOPILOT_VERSION):
+            if msg_id == MSG_GPS_GLOBAL_ORIGIN:  # PX4 sends it once and on change: clients ask for it
+                lat, lon, alt = self.tm.home
+                reply = mavlink2.MAVLink_gps_global_origin_message(round(lat * 1e7), round(lon * 1e7), round(alt * 1000), now_us)
+            elif msg_id is not None and (msg_id in self._default_us or msg_id == MSG_AUTOPILOT_VERSION):
                 pos, vel = estimate()
                 reply = self.tm.build(msg_id, now_us, c, veh, pos, vel)
             result = MAV_RESULT.ACCEPTED if reply is not None else MAV_RESULT.DENIED

@@ -19,7 +19,7 @@ import math
 import sys
 from importlib import metadata
 
-from mavsim.core import Simulator
+from mavsim.core import OBSTACLE_LINK, Simulator
 from mavsim.errors import ScenarioError, SimulationError
 from mavsim.lockstep import LockstepSimulator
 from mavsim.scenario import default_scenario, load_scenario
@@ -66,6 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gcs-port", type=_port, default=14550, help="ground station port to send to (default 14550)")
     p.add_argument("--api-local-port", type=_port, default=14580, help="local API socket port (default 14580)")
     p.add_argument("--gcs-local-port", type=_port, default=18570, help="local GCS socket port (default 18570)")
+    p.add_argument("--obstacle-port", type=_port, default=14601,
+                   help="port obstacles with transport = \"link\" are sent to (the companion's --obstacles port; default 14601)")
+    p.add_argument("--obstacle-local-port", type=_port, default=14591, help="local obstacle socket port (default 14591)")
     p.add_argument("--no-gcs", action="store_true", help="serve the API link only")
     p.add_argument("--bind", default="127.0.0.1", help="address to bind (default 127.0.0.1, loopback)")
     p.add_argument("--target-host", default="127.0.0.1", help="host to send to (default 127.0.0.1)")
@@ -97,6 +100,8 @@ def main(argv: list[str] | None = None) -> int:
         if not args.no_gcs:
             links.append(LinkAddress("gcs", args.gcs_local_port, args.gcs_port, args.bind, args.target_host))
         sim = Simulator(scenario, seed=args.seed, links=tuple(l.name for l in links))
+        if OBSTACLE_LINK in sim.links:  # some obstacle sends on its own link, like a perception process
+            links.append(LinkAddress(OBSTACLE_LINK, args.obstacle_local_port, args.obstacle_port, args.bind, args.target_host))
         try:
             server = UdpServer(sim, links, speed=args.speed, tlog=args.tlog)
         except SimulationError as exc:
@@ -106,6 +111,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mavsim: scenario {scenario.name!r}, API {args.bind}:{ports['api']} -> "
               f"{args.target_host}:{args.api_port}"
               + ("" if args.no_gcs else f", GCS {args.bind}:{ports['gcs']} -> {args.target_host}:{args.gcs_port}")
+              + (f", obstacles {args.bind}:{ports[OBSTACLE_LINK]} -> {args.target_host}:{args.obstacle_port}"
+                 if OBSTACLE_LINK in ports else "")
               + f", speed {args.speed:g}x", file=sys.stderr, flush=True)
         with server:
             try:

@@ -11,8 +11,11 @@ time; their replies are stamped with it. Each step:
 4. STATUSTEXTs, due telemetry of the vehicle and of every obstacle system are emitted.
 
 Packets are encoded per (link, system, component) so each link has its own sequence
-numbers, as each PX4 MAVLink instance does. Obstacle systems appear on the ``"api"``
-link only. Randomness: one ``numpy.random.Generator`` per source (vehicle estimate,
+numbers, as each PX4 MAVLink instance does. Obstacles reach the client the way their
+``transport`` says: on the separate ``"obstacles"`` link (added to the links when an
+obstacle uses it; the autopilot streams nothing there and ignores what arrives on it),
+re-streamed by the autopilot as ADSB_VEHICLE on every vehicle link, or (the old way) as
+ODOMETRY on the API link. Randomness: one ``numpy.random.Generator`` per source (vehicle estimate,
 each obstacle) spawned from ``SeedSequence(seed)``, so a seed fixes every byte.
 """
 
@@ -28,7 +31,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from mavsim.autopilot import COMPID, SYSID, Autopilot, statustext
 from mavsim.errors import SimulationError
-from mavsim.obstacles import ObstacleSystem, noise_factor
+from mavsim.obstacles import AUTOPILOT_ALL_LINKS, OWN_API_LINK, ObstacleSystem, noise_factor
 from mavsim.params import ParamStore
 from mavsim.px4 import Commander
 from mavsim.scenario import Scenario, load_scenario
@@ -40,6 +43,8 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["Simulator", "Packet"]
 
+#: Name of the link obstacles with ``transport = "link"`` send on.
+OBSTACLE_LINK = "obstacles"
 #: (time since boot in us, link name, raw packet bytes)
 Packet = tuple[int, str, bytes]
 #: tap(direction "in"/"out", link, time_us, packet bytes)
@@ -55,7 +60,8 @@ class Simulator:
     seed : int
         Seeds every noise source.
     links : tuple of str
-        Link names; the first one is the offboard API link that also carries obstacles.
+        Vehicle link names; the first one is the offboard API link. When an obstacle uses
+        ``transport = "link"``, :data:`OBSTACLE_LINK` is appended (see :attr:`links`).
     """
 
     def __init__(self, scenario: Scenario | str | Path, seed: int = 0, links: tuple[str, ...] = ("api",)) -> None:
@@ -65,7 +71,9 @@ class Simulator:
             raise SimulationError("at least one link is needed")
         self.scenario = scenario
         self.seed = int(seed)
-        self.links = tuple(links)
+        self.vehicle_links = tuple(links)
+        needs_obstacle_link = any(ob.transport == "link" for ob in scenario.obstacles)
+        self.links = self.vehicle_links + ((OBSTACLE_LINK,) if needs_obstacle_link and OBSTACLE_LINK not in links else ())
         cfg = scenario.sim
         self.now_us = 0
         self.step_us = max(1, round(cfg.physics_step_s * 1e6))
@@ -80,10 +88,11 @@ class Simulator:
                                    cfg.arming_delay_s, cfg.offboard_reject_ack)
         tm = TelemetryBuilder(cfg.position_noise_cov_m2, cfg.velocity_noise_cov_m2ps2,
                               cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m)
-        self.autopilot = Autopilot(self.commander, self.params, tm, self.links, cfg.stream_rates_hz, cfg.home_alt_m)
+        self.autopilot = Autopilot(self.commander, self.params, tm, self.vehicle_links, cfg.stream_rates_hz, cfg.home_alt_m)
+        origin = (cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m)
         self.obstacles = [
             ObstacleSystem(ob, scenario.obstacle_sysid_base + i, scenario.obstacle_compid,
-                           np.random.Generator(np.random.PCG64(seeds[1 + i])), i)
+                           np.random.Generator(np.random.PCG64(seeds[1 + i])), i, origin)
             for i, ob in enumerate(scenario.obstacles)
         ]
         self.recorder = TruthRecorder(scenario)
@@ -142,7 +151,7 @@ class Simulator:
         if texts:
             for severity, text in texts:
                 msg = statustext(severity, text)
-                for link in self.links:
+                for link in self.vehicle_links:
                     self._send(link, SYSID, COMPID, msg)
             texts.clear()
 
@@ -152,8 +161,12 @@ class Simulator:
             self._send(link, SYSID, COMPID, msg)
         api = self.links[0]
         for ob in self.obstacles:
-            for msg in ob.due(self.now_us):
-                self._send(api, ob.sysid, ob.compid, msg)
+            for route, msg in ob.due(self.now_us):
+                if route == AUTOPILOT_ALL_LINKS:
+                    for link in self.vehicle_links:
+                        self._send(link, SYSID, COMPID, msg)
+                else:
+                    self._send(api if route == OWN_API_LINK else OBSTACLE_LINK, ob.sysid, ob.compid, msg)
 
     # ------------------------------------------------------------------ public
     def receive(self, data: bytes, link: str | None = None) -> None:
@@ -179,10 +192,13 @@ class Simulator:
             if isinstance(msg, mavlink2.MAVLink_unknown):  # unknown id: no CRC check possible
                 self.stats["unknown_messages"] += 1
                 continue
-            self.stats["packets_received"] += 1
             raw = bytes(msg.get_msgbuf())
             for tap in self.taps:
                 tap("in", link, self.now_us, raw)
+            if link == OBSTACLE_LINK:  # obstacle senders take no input: count what reached them
+                self.stats["obstacle_link_received"] += 1
+                continue
+            self.stats["packets_received"] += 1
             try:
                 replies = self.autopilot.handle(msg, link, self.now_us, self.vehicle, self._estimate)
             except Exception:  # a handler bug must not kill the vehicle; log it loudly

@@ -5,7 +5,8 @@ Contract (docs/ARCHITECTURE.md)::
     sim = LockstepSimulator.from_file("configs/antipodal.toml", seed=0)
     sim.time_s                  # simulated seconds since boot
     sim.write(packet_bytes)     # bytes to the vehicle's API port (any chunking)
-    out = sim.advance(0.05)     # [(t_s, packet_bytes), ...] in send order, one packet each
+    out = sim.advance(0.05)     # [(t_s, packet_bytes), ...] in send order, one packet each (API link)
+    obs = sim.take_obstacle_packets()   # what the obstacle link sent meanwhile (transport = "link")
     sim.summary()               # dict (JSON-serialisable)
     sim.truth                   # mavsim.truth.Truth
 
@@ -23,7 +24,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from mavsim.core import Simulator
+from mavsim.core import OBSTACLE_LINK, Simulator
 from mavsim.errors import SimulationError
 from mavsim.scenario import Scenario, load_scenario, scenario_from_dict
 from mavsim.tlog import LOCKSTEP_EPOCH_US, TlogWriter
@@ -54,6 +55,7 @@ class LockstepSimulator:
             scenario = load_scenario(scenario)
         self._tlog = TlogWriter(tlog) if tlog is not None else None
         self._sim = Simulator(scenario, seed=seed, links=("api",))
+        self._obstacle_packets: list[tuple[float, bytes]] = []
         if self._tlog is not None:
             # The boot packets were queued before the tap existed; record them on output.
             self._sim.taps.append(self._record_in)
@@ -86,10 +88,22 @@ class LockstepSimulator:
         if not math.isfinite(dt_s) or dt_s < 0:
             raise SimulationError(f"advance needs a finite dt_s >= 0, got {dt_s}")
         packets = self._sim.advance_to(self._sim.now_us + round(dt_s * 1e6))
+        api = [(t_us, data) for t_us, link, data in packets if link == "api"]
+        self._obstacle_packets.extend((t_us * 1e-6, data) for t_us, link, data in packets if link == OBSTACLE_LINK)
         if self._tlog is not None:
-            for t_us, _, data in packets:
+            for t_us, data in api:
                 self._tlog.write(LOCKSTEP_EPOCH_US + t_us, data)
-        return [(t_us * 1e-6, data) for t_us, _, data in packets]
+        return [(t_us * 1e-6, data) for t_us, data in api]
+
+    @property
+    def has_obstacle_link(self) -> bool:
+        """Whether some obstacle sends on the separate obstacle link."""
+        return OBSTACLE_LINK in self._sim.links
+
+    def take_obstacle_packets(self) -> list[tuple[float, bytes]]:
+        """``[(t_s, packet), ...]`` the obstacle link sent since the last call, in send order."""
+        out, self._obstacle_packets = self._obstacle_packets, []
+        return out
 
     def summary(self) -> dict:
         """Run summary (see :meth:`mavsim.core.Simulator.summary`)."""

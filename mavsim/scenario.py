@@ -47,7 +47,25 @@ obstacle_compid : int, default 197 (MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY, never 
 obstacles : array of tables ``[[world.obstacles]]`` with name, radius_m, start_ned_m,
     ``velocity_ned_mps`` or (``waypoints_ned_m``, ``speed_mps``, optional ``loop``),
     measurement_cov_m2, optional velocity_cov_m2ps2 (velocity reported only if
-    given), report_rate_hz (default 10), start_delay_s (default 0).
+    given), report_rate_hz (default 10), start_delay_s (default 0), and how the obstacle
+    reaches the companion (docs/OBSTACLES.md):
+
+    transport : ``"link"`` (default), ``"adsb"`` or ``"api"``
+        ``"link"``: the obstacle's own MAVLink system on the separate obstacle link (a
+        perception process, a swarm radio), sending ``message``. ``"adsb"``: the simulated
+        autopilot re-streams it as ADSB_VEHICLE on its own links under its own system id, as
+        PX4 does with transponder traffic (and forwards the original packet under the
+        obstacle's id, so each report arrives twice). ``"api"``: the old way, ODOMETRY on the
+        vehicle's API link (dangerous with a real PX4: explicit only).
+    message : ``"ODOMETRY"`` (default), ``"LOCAL_POSITION_NED"``, ``"UTM_GLOBAL_POSITION"`` or
+        ``"OPEN_DRONE_ID_LOCATION"`` (with ``transport = "link"``).
+    clock_offset_s : float, default 0
+        The sender's clock minus the vehicle's boot clock at boot (s). A clock before its
+        zero wraps as its field does (uint32 ms, uint64 us).
+    clock_drift : float, default 0
+        Fractional rate error of the sender's clock (0.01: it runs 1 % fast), in [-0.1, 0.1].
+    icao_address : int, default 0xA00000 + system id (ADSB)
+    emitter_type : int, default 14 (ADSB_EMITTER_TYPE_UAV)
 """
 
 from __future__ import annotations
@@ -118,6 +136,12 @@ class Obstacle:
     velocity_cov_m2ps2: np.ndarray | None
     report_rate_hz: float
     start_delay_s: float
+    transport: str = "link"
+    message: str = "ODOMETRY"
+    clock_offset_s: float = 0.0
+    clock_drift: float = 0.0
+    icao_address: int | None = None
+    emitter_type: int = 14
 
 
 @dataclass(frozen=True)
@@ -166,7 +190,11 @@ _WORLD_KEYS = {"obstacles", "obstacle_sysid_base", "obstacle_compid"}
 _OBSTACLE_KEYS = {
     "name", "radius_m", "start_ned_m", "velocity_ned_mps", "waypoints_ned_m", "speed_mps", "loop",
     "measurement_cov_m2", "velocity_cov_m2ps2", "report_rate_hz", "start_delay_s",
+    "transport", "message", "clock_offset_s", "clock_drift", "icao_address", "emitter_type",
 }
+#: Obstacle transports and the messages a ``"link"`` obstacle can send.
+TRANSPORTS = ("link", "adsb", "api")
+LINK_MESSAGES = ("ODOMETRY", "LOCAL_POSITION_NED", "UTM_GLOBAL_POSITION", "OPEN_DRONE_ID_LOCATION")
 
 
 class _Section:
@@ -327,6 +355,12 @@ def _obstacle(src: str, index: int, raw: Any) -> Obstacle:
     elif s.has("speed_mps") or s.has("loop"):
         raise s.err("speed_mps", "speed_mps and loop go with waypoints_ned_m only")
     vel_cov = s.covariance("velocity_cov_m2ps2") if s.has("velocity_cov_m2ps2") else None
+    transport = s.string("transport", "link")
+    if transport not in TRANSPORTS:
+        raise s.err("transport", f"must be one of {', '.join(TRANSPORTS)}, got {transport!r}")
+    message = s.string("message", "ODOMETRY")
+    if message not in LINK_MESSAGES or (transport != "link" and s.has("message")):
+        raise s.err("message", f"must be one of {', '.join(LINK_MESSAGES)}, with transport = \"link\" only; got {message!r}")
     return Obstacle(
         name=s.string("name", f"obs{index + 1}"),
         radius_m=s.number("radius_m", 0.5, lo=0.0),
@@ -339,6 +373,12 @@ def _obstacle(src: str, index: int, raw: Any) -> Obstacle:
         velocity_cov_m2ps2=vel_cov,
         report_rate_hz=s.number("report_rate_hz", 10.0, lo=0.1, hi=200.0),
         start_delay_s=s.number("start_delay_s", 0.0, lo=0.0),
+        transport=transport,
+        message=message,
+        clock_offset_s=s.number("clock_offset_s", 0.0, lo=-1e6, hi=1e6),
+        clock_drift=s.number("clock_drift", 0.0, lo=-0.1, hi=0.1),
+        icao_address=s.integer("icao_address", 0, lo=1, hi=0xFFFFFF) if s.has("icao_address") else None,
+        emitter_type=s.integer("emitter_type", 14, lo=0, hi=19),
     )
 
 

@@ -9,7 +9,9 @@ Wire layout (PX4 SITL defaults, all configurable)::
 Each link is one UDP socket bound to its local port. Packets go unsolicited to the
 target address; once a datagram arrives, the link answers the address it came from
 (PX4 does the same), so ``udpin:127.0.0.1:14540`` and ``udpout:127.0.0.1:14580``
-clients both work. Obstacle systems are sent on the API link only.
+clients both work. Obstacles go where their ``transport`` puts them (the obstacle link,
+``"obstacles"``, when the simulator has one: like a perception process sending to the
+companion's obstacle port; ADSB re-streamed on the vehicle links; or the API link).
 
 Simulated time runs ``speed`` times faster than the wall clock; the simulator is
 advanced to ``elapsed_wall * speed`` every tick (about one physics step of wall

@@ -107,15 +107,16 @@ def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out
 
 
 def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None) -> dict:
-    api_port, gcs_port, api_local, gcs_local = (_free_udp_port() for _ in range(4))
+    api_port, gcs_port, api_local, gcs_local, obstacle_port, obstacle_local = (_free_udp_port() for _ in range(6))
     sim_cmd = [
         sys.executable, "-m", "mavsim.cli", "--scenario", str(scenario), "--seed", str(args.seed),
         "--api-port", str(api_port), "--gcs-port", str(gcs_port), "--api-local-port", str(api_local),
-        "--gcs-local-port", str(gcs_local), "--speed", str(args.speed), "--json",
+        "--gcs-local-port", str(gcs_local), "--obstacle-port", str(obstacle_port),
+        "--obstacle-local-port", str(obstacle_local), "--speed", str(args.speed), "--json",
     ]
     fly_cmd = [
         sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{api_port}", "--scenario", str(scenario),
-        "--exit-after-goal", "1.0", "--json",
+        "--obstacles", f"udpin:127.0.0.1:{obstacle_port}", "--exit-after-goal", "1.0", "--json",
     ]
     if out is not None:
         sim_cmd += ["--tlog", str(out / "mavsim.tlog")]

@@ -9,6 +9,7 @@ import sys
 import time
 
 from companion.loop.app import Companion
+from companion.loop.traffic_config import obstacle_link_name
 from companion.mavlink.link import DEFAULT_URL, open_link
 from companion.loop.realtime import run_realtime
 from companion.offline.report import companion_report, format_report
@@ -29,6 +30,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("--connect", default=DEFAULT_URL, help=f"pymavlink connection string (default {DEFAULT_URL})")
+    p.add_argument(
+        "--obstacles", action="append", default=[], metavar="URL",
+        help="receive-only obstacle link (pymavlink connection string, e.g. udpin:0.0.0.0:14601); repeatable; "
+        "added to the scenario's [traffic] obstacle_links",
+    )
     p.add_argument("--scenario", required=True, help="scenario TOML (mission, planner, estimator, map)")
     p.add_argument("--arm", action="store_true", help="arm the vehicle if it is disarmed")
     p.add_argument("--takeoff-alt", type=float, default=None, metavar="M", help="take off to M metres above home first")
@@ -65,12 +71,24 @@ def run(args: argparse.Namespace) -> int:
         return c.sequencer.phase.name == "GAVE_UP"
 
     link = open_link(args.connect, tlog=args.tlog, clock=microsecond_clock)
+    obstacle_links = []
+    try:
+        for i, url in enumerate((*scenario.traffic.obstacle_links, *args.obstacles)):
+            obstacle_links.append(open_link(url, clock=microsecond_clock, name=obstacle_link_name(i), receive_only=True))
+    except Exception:
+        for ob in obstacle_links:
+            ob.close()
+        link.close()
+        raise
     started = microsecond_clock()
     try:
-        stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock)
+        stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock,
+                             obstacle_links=obstacle_links)
     except KeyboardInterrupt:
         stats = None
     finally:
+        for ob in obstacle_links:
+            ob.close()
         link.close()
     report = companion_report(companion)
     for key in ("events", "failsafe_events"):  # seconds since the start of this run, not epoch

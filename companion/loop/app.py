@@ -28,6 +28,7 @@ from companion.mavlink.offboard import Notify, OffboardConfig, OffboardSequencer
 from companion.core.overlap import contour_of_touch
 from companion.core.planner import Plan, Planner, PlanRequest
 from companion.loop.config import CompanionScenario
+from companion.loop.obstacles import ObstacleIntake
 from estimator import DroneFilter, ObstacleTracker
 
 logger = logging.getLogger(__name__)
@@ -118,6 +119,7 @@ class Companion:
         self._statics = scenario.static_obstacles
         self._ignored_keys: set[tuple[int, int]] = set()
         self._reported_cov: np.ndarray | None = None  # the autopilot's own position covariance (ODOMETRY), m^2
+        self.obstacles = ObstacleIntake(scenario.traffic, self.tracker, self.vehicle_time, lp.obstacle_radius_m)
 
     @property
     def autopilot(self) -> tuple[int, int] | None:
@@ -128,6 +130,8 @@ class Companion:
 
     def handle(self, rx: Received) -> None:
         """Take one inbound message (never raises for bad content: it is logged and counted)."""
+        if self.obstacles.claims(rx, self.autopilot):  # obstacle links, traffic, GPS_GLOBAL_ORIGIN
+            return
         if rx.msg.get_type() == "HOME_POSITION" and self.autopilot is not None and messages.source_key(rx.msg) == self.autopilot:
             self.sequencer.on_home_altitude(rx.msg.altitude / 1000.0)  # mm AMSL -> m
             return
@@ -203,6 +207,9 @@ class Companion:
                 out.append(action.msg)
             elif isinstance(action, Notify):
                 out.append(self._say(t_s, action.event.severity, action.event.text))
+        requests, texts = self.obstacles.outbound(t_s, self.autopilot)
+        out.extend(requests)
+        out.extend(self._say(t_s, severity, text) for severity, text in texts)
         seq = self.sequencer.state
         if not seq.streaming:
             if self.state.mode not in ("waiting", "idle"):
@@ -331,7 +338,7 @@ class Companion:
             m0, c0 = self.tracker.predict(key, np.array([t_v]))
             means.append(m)
             covs.append(c)
-            radii.append(self.loop.obstacle_radius_m)
+            radii.append(self.obstacles.radius(key))
             now_pos[key], now_cov[key] = m0[0], c0[0]
         for i, s in enumerate(self._statics):
             means.append(np.broadcast_to(s.center, (n, 3)))

@@ -21,11 +21,12 @@ import numpy as np
 from companion.errors import ConfigError
 from companion.mavlink.offboard import OffboardConfig
 from companion.core.planner.config import PlannerConfig
+from companion.loop.traffic_config import TrafficConfig, traffic_from_toml
 from estimator import DroneFilterConfig, EstimatorConfigError, TrackerConfig
 
 logger = logging.getLogger(__name__)
 
-_TOP_LEVEL = {"scenario", "vehicle", "mission", "planner", "estimator", "map", "companion", "sim", "world"}
+_TOP_LEVEL = {"scenario", "vehicle", "mission", "planner", "estimator", "map", "companion", "sim", "world", "traffic"}
 
 
 def _vec3(value: Any, where: str) -> np.ndarray:
@@ -148,6 +149,7 @@ class CompanionScenario:
     loop: LoopConfig
     walls: tuple[Wall, ...] = field(default_factory=tuple)
     static_obstacles: tuple[StaticObstacle, ...] = field(default_factory=tuple)
+    traffic: TrafficConfig = field(default_factory=TrafficConfig)
 
     @property
     def walls_normal(self) -> np.ndarray:
@@ -254,4 +256,5 @@ def load_scenario(path: str | Path, **planner_overrides: Any) -> CompanionScenar
         loop=loop,
         walls=tuple(walls),
         static_obstacles=tuple(statics),
+        traffic=traffic_from_toml(data.get("traffic", {}), f"{path} [traffic]"),
     )

@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import Callable
 
 from companion.loop.app import Companion
@@ -37,6 +38,7 @@ def run_realtime(
     clock: Callable[[], float] = time.time,
     sleep: Callable[[float], None] = time.sleep,
     poll_period_s: float = 0.002,
+    obstacle_links: Sequence[Link] = (),
 ) -> RealtimeStats:
     """Run the companion against a live link until ``duration_s`` passes or ``stop(companion)``.
 
@@ -47,6 +49,8 @@ def run_realtime(
     duration_s : wall seconds to run; None runs until ``stop`` or KeyboardInterrupt.
     stop : checked after every tick.
     clock, sleep : injectable for tests.
+    obstacle_links : receive-only links carrying traffic (their messages reach the companion
+        tagged with the link's name; nothing is ever sent on them).
     """
     period = 1.0 / companion.loop.setpoint_rate_hz
     stats = RealtimeStats()
@@ -56,6 +60,10 @@ def run_realtime(
         now = clock()
         for rx in link.poll():
             companion.handle(rx)
+        for obstacle_link in obstacle_links:
+            for rx in obstacle_link.poll():
+                companion.handle(rx)
+        link.peer = companion.autopilot  # commands go to the autopilot's address only
         if now >= next_tick:
             for msg in companion.tick(now):
                 link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times

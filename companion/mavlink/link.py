@@ -25,6 +25,14 @@ time the harness passes to :meth:`MemoryLink.deliver` (lockstep).
 
 Logging to a tlog records every packet sent and every valid packet received,
 stamped ``t_s + tlog_offset_s`` (see :mod:`companion.mavlink.tlog`).
+
+Roles. Each link has a ``name`` that every :class:`Received` carries: ``"autopilot"``
+(the one link setpoints and commands go to) or ``"obstaclesN"`` (receive-only: sending
+on it raises). On a ``udpin`` autopilot link the companion answers one address only:
+the one the autopilot (:attr:`Link.peer`, set by the loop) last sent from, or before
+the autopilot is known, the last address heard. pymavlink's own ``udpin`` writer
+sends every packet to every address it has heard, which would hand setpoints to any
+other system that talks to the port.
 """
 
 from __future__ import annotations
@@ -71,6 +79,7 @@ class Received:
     t_s: float
     msg: mavlink2.MAVLink_message
     raw: bytes
+    link: str = "autopilot"
 
 
 @dataclass
@@ -83,6 +92,7 @@ class LinkStats:
     own_echo: int = 0
     bytes_in: int = 0
     bytes_out: int = 0
+    unaddressed: int = 0  # packets not sent: the peer's address is not known yet
 
 
 class Link(abc.ABC):
@@ -103,6 +113,10 @@ class Link(abc.ABC):
     signing_key : bytes, optional
         32-byte MAVLink 2 signing key: outbound packets are signed and inbound
         unsigned packets dropped unless ``accept_unsigned``.
+    name : str
+        The link's role, carried by every :class:`Received`: ``"autopilot"`` or ``"obstaclesN"``.
+    receive_only : bool
+        Refuse to send (obstacle links).
     """
 
     def __init__(
@@ -116,6 +130,8 @@ class Link(abc.ABC):
         signing_key: bytes | None = None,
         signing_link_id: int = 0,
         accept_unsigned: bool = False,
+        name: str = "autopilot",
+        receive_only: bool = False,
     ) -> None:
         if not (1 <= int(source_system) <= 255 and 0 <= int(source_component) <= 255):
             raise LinkError(f"MAVLink source ids out of range: system {source_system}, component {source_component}")
@@ -129,6 +145,10 @@ class Link(abc.ABC):
         self.tlog: TlogWriter | None = TlogWriter(tlog) if self._owns_tlog else tlog  # type: ignore[arg-type]
         self.tlog_offset_s = float(tlog_offset_s)
         self._closed = False
+        self.name = str(name)
+        self.receive_only = bool(receive_only)
+        #: (system, component) the link's outbound traffic is for (the autopilot), set by the loop.
+        self.peer: tuple[int, int] | None = None
         if signing_key is not None:
             self._setup_signing(bytes(signing_key), int(signing_link_id), bool(accept_unsigned))
 
@@ -174,6 +194,8 @@ class Link(abc.ABC):
         """
         if self._closed:
             raise LinkError(f"{self!r} is closed")
+        if self.receive_only:
+            raise LinkError(f"{self!r} is receive-only (link {self.name!r}); not sending {msg.get_type()}")
         packet = bytes(msg.pack(self._mav))
         self._mav.seq = (self._mav.seq + 1) % 256
         t_s = self.clock() if t_s is None else float(t_s)
@@ -218,7 +240,7 @@ class Link(abc.ABC):
             self.stats.received += 1
             if self.tlog is not None:
                 self.tlog.write(t_s + self.tlog_offset_s, raw)
-            out.append(Received(t_s, msg, raw))
+            out.append(Received(t_s, msg, raw, self.name))
         if datagram and self._mav.buf_len() > 0:
             logger.debug("dropped %d bytes of a partial packet at the end of a datagram", self._mav.buf_len())
             self._reset_parser()
@@ -373,11 +395,29 @@ class MavutilLink(Link):
                 self.tlog.close()
             raise LinkError(f"cannot open MAVLink connection {url!r}: {exc}") from exc
         self._datagram = url.startswith(("udpin:", "udpout:", "udp:", "udpbcast:"))
+        # udpin (server): one reply address, chosen here, instead of pymavlink's send-to-all.
+        self._server = url.startswith(("udpin:", "udp:")) and getattr(self._conn, "udp_server", False)
+        self._address_of: dict[tuple[int, int], tuple] = {}
+        self._last_address: tuple | None = None
         logger.info("opened MAVLink connection %s as system %d component %d", url, *self.key)
+
+    def destination(self) -> tuple | None:
+        """Where a udpin link sends: the peer's last address, or the last address heard before
+        the peer is known; None when the peer is known but has not been heard on this link."""
+        if self.peer is None:
+            return self._last_address
+        return self._address_of.get(self.peer)
 
     def _write(self, packet: bytes) -> None:
         try:
-            self._conn.write(packet)
+            if self._server:
+                address = self.destination()
+                if address is None:
+                    self.stats.unaddressed += 1
+                    return
+                self._conn.port.sendto(packet, address)
+            else:
+                self._conn.write(packet)
         except OSError as exc:
             raise LinkError(f"write to {self.url!r} failed: {exc}") from exc
 
@@ -386,6 +426,20 @@ class MavutilLink(Link):
             raise LinkError(f"{self!r} is closed")
         out: list[Received] = []
         for _ in range(_MAX_READS_PER_POLL):
+            if self._server:
+                got = self._recv_from()
+                if got is None:
+                    break
+                chunk, address = got
+                received = self._parse(self.clock(), chunk, datagram=True)
+                for rx in received:
+                    key = (rx.msg.get_srcSystem(), rx.msg.get_srcComponent())
+                    if key in self._address_of or len(self._address_of) < 256:
+                        self._address_of[key] = address
+                if received:
+                    self._last_address = address
+                out.extend(received)
+                continue
             try:
                 chunk = self._conn.recv(_READ_SIZE)
             except OSError as exc:
@@ -397,11 +451,23 @@ class MavutilLink(Link):
             out.extend(self._parse(self.clock(), bytes(chunk), datagram=self._datagram))
         return out
 
+    def _recv_from(self) -> tuple[bytes, tuple] | None:
+        """One datagram and its source address from a udpin socket, or None if none is waiting."""
+        try:
+            data, address = self._conn.port.recvfrom(_READ_SIZE)
+        except (BlockingIOError, InterruptedError):
+            return None
+        except ConnectionRefusedError:  # ICMP port unreachable of an earlier send (Linux)
+            return None
+        except OSError as exc:
+            raise LinkError(f"read from {self.url!r} failed: {exc}") from exc
+        return bytes(data), address
+
     def _close_transport(self) -> None:
         self._conn.close()
 
     def __repr__(self) -> str:
-        return f"MavutilLink({self.url!r}, source={self.key})"
+        return f"MavutilLink({self.url!r}, name={self.name!r}, source={self.key})"
 
 
 def open_link(url: str = DEFAULT_URL, **kwargs) -> MavutilLink:

@@ -84,6 +84,8 @@ def run_lockstep(
     sim = LockstepSimulator.from_file(scenario_path, seed=seed, tlog=sim_tlog_path)
     companion = Companion(scenario, offboard=offboard)
     link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path)
+    # Obstacles with transport = "link" arrive on their own receive-only link, as on a vehicle.
+    obstacle_link = MemoryLink(clock=lambda: sim.time_s, name="obstacles1", receive_only=True) if sim.has_obstacle_link else None
     rng = np.random.default_rng([seed, 0xC0FFEE])
     dt = 1.0 / scenario.loop.setpoint_rate_hz
     limit = scenario.duration_s if duration_s is None else float(duration_s)
@@ -110,6 +112,14 @@ def run_lockstep(
                     link.deliver(sim.time_s, packet)
             for rx in link.poll():
                 companion.handle(rx)
+            if obstacle_link is not None:
+                for t_pkt, packet in sim.take_obstacle_packets():
+                    if lost(t_pkt, "to_companion", packet):
+                        dropped += 1
+                        continue
+                    obstacle_link.deliver(t_pkt, packet)
+                for rx in obstacle_link.poll():
+                    companion.handle(rx)
             n_records = len(companion.records)
             for msg in companion.tick(sim.time_s):
                 link.send(msg)
@@ -140,4 +150,6 @@ def run_lockstep(
         )
     finally:
         link.close()
+        if obstacle_link is not None:
+            obstacle_link.close()
         sim.close()

@@ -45,6 +45,7 @@ def companion_report(companion: Companion) -> dict:
         "messages_rejected": state.messages_rejected,
         "obstacle_reports_rejected": state.obstacle_rejections,
         "tracks": len(companion.tracker),
+        "obstacle_intake": companion.obstacles.summary(),
         "failsafe_events": [(round(t, 2), text) for t, text in state.events if any(w in text for w in _FAILSAFE_WORDS)],
         "events": [(round(t, 2), text) for t, text in state.events],
     }

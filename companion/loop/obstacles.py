@@ -1,0 +1,257 @@
+"""Obstacle intake: every traffic report from every link, to the obstacle tracker or to a counted rejection.
+
+Routing (by link role, then system id, then ICAO address):
+
+- obstacle links (``obstaclesN``) are receive-only. Their traffic kinds go to the tracker if
+  the source's policy accepts them. Anything from the autopilot's own system id on an
+  obstacle link is *wrong link*: counted, not used (the autopilot is followed on its own
+  link only).
+- the autopilot link: ADSB_VEHICLE (re-streamed by PX4 under its own id, and the original
+  packets it forwards under the senders' ids) is traffic; other traffic kinds from other
+  systems are wrong link unless ``[traffic] autopilot_link_kinds`` accepts them.
+  ODOMETRY from another system on the autopilot link raises a warning at once: PX4 may fuse
+  it as its own external vision.
+
+Tracks are keyed by identity: ``("icao", address)`` for ADSB on any link (so the two copies
+PX4 delivers are one aircraft; a copy within 2 LSB of lat/lon, 1 cm of altitude and 1 s of
+the previous report is a duplicate, counted and dropped), ``(link, "uas", id)`` for UTM and
+Remote ID reports that carry one, ``(link, "system", sysid, compid)`` otherwise.
+
+Time: each identity's stamps are mapped onto link time by its own
+:class:`~companion.loop.clocks.SourceClock` (ADSB carries no stamp: arrival minus ``tslc``),
+then onto the vehicle's time by the caller's ``vehicle_time``. A clock jump restarts the
+mapping and the track (never freezes it); a report from the future is clamped.
+
+Nothing is dropped silently: every rejection is counted per source and reason
+(:meth:`ObstacleIntake.summary`), logged, and announced by a STATUSTEXT at most once per
+``statustext_period_s``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from collections.abc import Callable
+from typing import Hashable
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.loop.clocks import SourceClock
+from companion.loop.traffic_config import AUTOPILOT_LINK, SourcePolicy, TrafficConfig
+from companion.mavlink import messages, traffic
+from companion.mavlink.link import Received
+
+logger = logging.getLogger(__name__)
+
+MSG_GPS_GLOBAL_ORIGIN = 49
+_ORIGIN_REQUEST_PERIOD_S = 2.0
+_DUPLICATE_WINDOW_S = 1.0
+_DUPLICATE_LATLON_LSB = 2  # PX4 truncates lat/lon of what it re-streams by about 1 cm (1 LSB)
+_MAX_SOURCES = 1024  # bounds per-source state whatever arrives
+Severity = int
+
+
+def _reason_code(reason: str) -> str:
+    """A short, countable form of a decoder's reason text."""
+    return reason.split(" (")[0].split(":")[0].strip()[:40]
+
+
+class ObstacleIntake:
+    """Routes traffic to the tracker; counts and announces what it cannot use.
+
+    Parameters
+    ----------
+    config : TrafficConfig
+    tracker : estimator.ObstacleTracker
+        Receives ``update(key, t_vehicle, ...)`` and ``drop(key)`` on a clock restart.
+    vehicle_time : callable (t_link) -> float or None
+        Link time to the vehicle's time (None while the vehicle's clock is unknown).
+    default_radius_m : float
+        Body radius of obstacles whose source sets none.
+    """
+
+    def __init__(self, config: TrafficConfig, tracker, vehicle_time: Callable[[float], float | None],
+                 default_radius_m: float) -> None:
+        self.config = config
+        self.tracker = tracker
+        self.vehicle_time = vehicle_time
+        self.default_radius_m = float(default_radius_m)
+        self.origin: traffic.GlobalOrigin | None = None
+        self.rejected: Counter[tuple[str, str]] = Counter()  # (source, reason) -> count
+        self.accepted: Counter[str] = Counter()
+        self.duplicates = 0
+        self.clamped: Counter[str] = Counter()
+        self.restarts: Counter[str] = Counter()
+        self.warnings: list[str] = []
+        self._clocks: dict[Hashable, SourceClock] = {}
+        self._radius: dict[Hashable, float] = {}
+        self._last_adsb: dict[int, tuple[float, int, int, int]] = {}
+        self._warned_odometry: set[tuple[int, int]] = set()
+        self._texts: list[tuple[Severity, str]] = []
+        self._last_text_t = -math.inf
+        self._announced = 0
+        self._origin_wanted = False
+        self._last_origin_request = -math.inf
+
+    # ------------------------------------------------------------------ inbound
+
+    def claims(self, rx: Received, autopilot: tuple[int, int] | None) -> bool:
+        """Take ``rx`` if it is the intake's business (returns True); else leave it to the caller."""
+        link = getattr(rx, "link", AUTOPILOT_LINK)
+        mtype = rx.msg.get_type()
+        key = messages.source_key(rx.msg)
+        on_autopilot_link = link == AUTOPILOT_LINK
+        if mtype == "GPS_GLOBAL_ORIGIN":
+            if on_autopilot_link and autopilot is not None and key[0] == autopilot[0]:
+                origin = traffic.decode_origin(rx.msg)
+                if origin != self.origin:
+                    logger.info("GPS_GLOBAL_ORIGIN %.7f %.7f %.2f m", origin.lat_deg, origin.lon_deg, origin.alt_m)
+                self.origin = origin
+                self._origin_wanted = False
+            elif not on_autopilot_link:
+                self._reject(f"{link} sys {key[0]}", "GPS_GLOBAL_ORIGIN not from the autopilot", rx.t_s)
+            return True
+        if not on_autopilot_link:
+            if autopilot is not None and key[0] == autopilot[0]:
+                self._reject(f"{link} sys {key[0]}", f"wrong link: {mtype} of the autopilot's system", rx.t_s)
+            elif mtype in traffic.TRAFFIC_KINDS:
+                self._take(rx, link, autopilot)
+            return True  # an obstacle link never drives the vehicle side
+        if mtype not in traffic.TRAFFIC_KINDS:
+            return False
+        if autopilot is None:
+            if mtype == "ADSB_VEHICLE":
+                self._take(rx, AUTOPILOT_LINK, autopilot)  # counted: no origin yet
+                return True
+            return False  # poses before the autopilot is known: the caller's rule
+        if key[0] == autopilot[0] and mtype != "ADSB_VEHICLE":
+            return False  # the vehicle's own estimate
+        if mtype == "ODOMETRY" and key not in self._warned_odometry:
+            self._warned_odometry.add(key)
+            text = (f"ODOMETRY from system {key[0]} component {key[1]} on the autopilot link: PX4 may fuse it as "
+                    f"its own external vision (EKF2_EV_CTRL). Fix: send obstacle ODOMETRY to a companion "
+                    f"--obstacles port, never onto the autopilot's MAVLink network")
+            logger.warning("%s", text)
+            self.warnings.append(text)
+            self._texts.append((mavlink2.MAV_SEVERITY_WARNING, f"ODOMETRY sys {key[0]} on AP link: EV risk"))
+        self._take(rx, AUTOPILOT_LINK, autopilot)
+        return True
+
+    def _take(self, rx: Received, link: str, autopilot) -> None:
+        msg = rx.msg
+        mtype = msg.get_type()
+        key = messages.source_key(msg)
+        icao = int(msg.ICAO_address) if mtype == "ADSB_VEHICLE" else None
+        source = f"{link} ICAO {icao:06X}" if icao is not None else f"{link} sys {key[0]}"
+        policy = self.config.policy(link, key[0], icao)
+        if mtype not in policy.kinds:
+            reason = "wrong link" if link == AUTOPILOT_LINK else "kind not accepted"
+            self._reject(source, f"{reason}: {mtype}", rx.t_s)
+            return
+        if mtype in traffic.GLOBAL_KINDS and self.origin is None:
+            self._origin_wanted = True
+        decoded = traffic.decode_traffic(msg, self.origin)
+        if isinstance(decoded, messages.Rejected):
+            self._reject(source, f"{mtype} {_reason_code(decoded.reason)}", rx.t_s)
+            return
+        assert decoded is not None
+        if icao is not None and self._is_duplicate(icao, msg, rx.t_s):
+            self.duplicates += 1
+            return
+        track = ("icao", icao) if icao is not None else (link, *decoded.identity)
+        self._fuse(track, source, decoded, policy, rx.t_s)
+
+    def _is_duplicate(self, icao: int, msg, t_rx: float) -> bool:
+        last = self._last_adsb.get(icao)
+        now = (t_rx, int(msg.lat), int(msg.lon), int(msg.altitude))
+        if last is not None and t_rx - last[0] <= _DUPLICATE_WINDOW_S and abs(now[1] - last[1]) <= _DUPLICATE_LATLON_LSB \
+                and abs(now[2] - last[2]) <= _DUPLICATE_LATLON_LSB and abs(now[3] - last[3]) <= 10:
+            return True
+        if len(self._last_adsb) < _MAX_SOURCES or icao in self._last_adsb:
+            self._last_adsb[icao] = now
+        return False
+
+    def _fuse(self, track: Hashable, source: str, r: traffic.TrafficReport, policy: SourcePolicy, t_rx: float) -> None:
+        if r.stamp is None:
+            t_link = t_rx - max(0.0, r.age_s)
+        else:
+            clock = self._clocks.get(track)
+            if clock is None:
+                if len(self._clocks) >= _MAX_SOURCES:
+                    self._reject(source, "too many sources", t_rx)
+                    return
+                clock = self._clocks[track] = SourceClock(window_s=self.config.clock_window_s, jump_s=self.config.clock_jump_s)
+            mapped = clock.map(r.stamp, t_rx, r.stamp_unit_s)
+            if mapped.restarted and clock.epochs > 1:
+                self.restarts[source] += 1
+                self._texts.append((mavlink2.MAV_SEVERITY_NOTICE, f"obstacle {source[:28]}: clock jump, track reset"))
+                if track in self.tracker:
+                    self.tracker.drop(track)
+            if mapped.clamped:
+                self.clamped[source] += 1
+            t_link = mapped.t_s
+        t_v = self.vehicle_time(t_link)
+        if t_v is None:
+            self._reject(source, "vehicle time unknown", t_rx)
+            return
+        h2, v2, vel2 = policy.position_std_m ** 2, policy.vertical_std_m ** 2, policy.velocity_std_mps ** 2
+        pos_cov = r.position_cov if r.position_cov is not None else np.diag([h2, h2, v2])
+        vel_cov = None
+        if r.velocity_ned is not None:
+            vel_cov = r.velocity_cov if r.velocity_cov is not None else vel2 * np.eye(3)
+            if r.vertical_velocity_unknown:
+                vel_cov = vel_cov.copy()
+                vel_cov[2, 2] = max(vel_cov[2, 2], vel2)
+        result = self.tracker.update(track, t_v, r.position_ned, r.velocity_ned, pos_cov, vel_cov)
+        if not result.accepted:
+            self._reject(source, f"tracker: {result.reason}", t_rx)
+            return
+        self.accepted[source] += 1
+        radius = policy.radius_m if policy.radius_m is not None else (r.radius_m or self.default_radius_m)
+        if track in self._radius or len(self._radius) < _MAX_SOURCES:
+            self._radius[track] = radius
+
+    def _reject(self, source: str, reason: str, t_s: float) -> None:
+        self.rejected[(source, reason)] += 1
+        logger.debug("obstacle report rejected: %s: %s", source, reason)
+
+    # ------------------------------------------------------------------ outbound
+
+    def radius(self, track: Hashable) -> float:
+        """Body radius of a tracked obstacle, metres."""
+        return self._radius.get(track, self.default_radius_m)
+
+    def outbound(self, t_s: float, autopilot: tuple[int, int] | None) -> tuple[list, list[tuple[Severity, str]]]:
+        """(messages to send, (severity, text) to announce) at link time ``t_s``.
+
+        Requests GPS_GLOBAL_ORIGIN (MAV_CMD_REQUEST_MESSAGE 49) while global traffic waits
+        for it, every 2 s; summarises new rejections in one STATUSTEXT per period.
+        """
+        out: list = []
+        if self._origin_wanted and autopilot is not None and t_s - self._last_origin_request >= _ORIGIN_REQUEST_PERIOD_S:
+            self._last_origin_request = t_s
+            out.append(messages.command_long(mavlink2.MAV_CMD_REQUEST_MESSAGE, (MSG_GPS_GLOBAL_ORIGIN,),
+                                             target_system=autopilot[0], target_component=autopilot[1]))
+        texts, self._texts = self._texts, []
+        total = sum(self.rejected.values())
+        if total > self._announced and t_s - self._last_text_t >= self.config.statustext_period_s:
+            (source, reason), _ = max(self.rejected.items(), key=lambda kv: kv[1])
+            texts.append((mavlink2.MAV_SEVERITY_WARNING, f"obstacles: {total - self._announced} rejected, {source}: {reason}"))
+            self._announced = total
+            self._last_text_t = t_s
+        return out, texts
+
+    def summary(self) -> dict:
+        """Counts for the run report: accepted, rejected per source and reason, clock events."""
+        return {
+            "accepted": dict(self.accepted),
+            "rejected": {f"{s}: {r}": n for (s, r), n in sorted(self.rejected.items())},
+            "rejected_total": sum(self.rejected.values()),
+            "adsb_duplicates": self.duplicates,
+            "clock_restarts": dict(self.restarts),
+            "future_clamped": dict(self.clamped),
+            "origin": None if self.origin is None else [self.origin.lat_deg, self.origin.lon_deg, self.origin.alt_m],
+            "warnings": list(self.warnings),
+        }
