@@ -144,10 +144,21 @@ class ObstacleSystem:
         # Phases spread the systems apart and keep the vehicle's HEARTBEAT first at boot.
         self.next_report_us = 1000 * (index + 1)
         self.next_heartbeat_us = 500_000 + 1000 * index
+        self._garbage_sent = False
 
     def clock_s(self, now_us: int) -> float:
         """The sender's own clock at simulated time ``now_us`` (seconds; may be negative)."""
-        return self.config.clock_offset_s + (1.0 + self.config.clock_drift) * now_us * 1e-6
+        t, cfg = now_us * 1e-6, self.config
+        if cfg.clock_reboot_at_s is not None and t >= cfg.clock_reboot_at_s:
+            return (1.0 + cfg.clock_drift) * (t - cfg.clock_reboot_at_s)  # rebooted: a boot clock from 0
+        return cfg.clock_offset_s + (1.0 + cfg.clock_drift) * t
+
+    def _garbage_due(self, now_us: int) -> bool:
+        at = self.config.garbage_stamp_at_s
+        if at is None or self._garbage_sent or now_us * 1e-6 < at:
+            return False
+        self._garbage_sent = True
+        return True
 
     def due(self, now_us: int) -> list[tuple[str, object]]:
         """(route, message) pairs due at ``now_us`` (call once per step, in time order)."""
@@ -171,12 +182,14 @@ class ObstacleSystem:
         clock = self.clock_s(now_us)
         if self.transport == "adsb":
             return [(AUTOPILOT_ALL_LINKS, self._adsb(p, v, truncate=True)), (OWN_API_LINK, self._adsb(p, v, truncate=False))]
+        garbage = self.message in ("ODOMETRY", "LOCAL_POSITION_NED") and self._garbage_due(now_us)
         if self.message == "ODOMETRY":
-            stamp = round(clock * 1e6) % (1 << 64)
+            stamp = 0xFFFFFFFF if garbage else round(clock * 1e6) % (1 << 64)
             return [(own, odometry_message(stamp, p, v, [1.0, 0.0, 0.0, 0.0], (_NAN, _NAN, _NAN),
                                            self._pose_cov, self._vel_cov, 0))]
         if self.message == "LOCAL_POSITION_NED":
-            return [(own, mavlink2.MAVLink_local_position_ned_message(round(clock * 1e3) % (1 << 32), *map(float, p), *map(float, v)))]
+            stamp = 0xFFFFFFFF if garbage else round(clock * 1e3) % (1 << 32)
+            return [(own, mavlink2.MAVLink_local_position_ned_message(stamp, *map(float, p), *map(float, v)))]
         lat, lon, alt = ned_to_global(float(p[0]), float(p[1]), float(p[2]), *self.origin)
         if self.message == "UTM_GLOBAL_POSITION":
             return [(own, self._utm(clock, lat, lon, alt, v))]

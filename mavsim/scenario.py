@@ -64,6 +64,11 @@ obstacles : array of tables ``[[world.obstacles]]`` with name, radius_m, start_n
         zero wraps as its field does (uint32 ms, uint64 us).
     clock_drift : float, default 0
         Fractional rate error of the sender's clock (0.01: it runs 1 % fast), in [-0.1, 0.1].
+    clock_reboot_at_s : float, optional
+        The sender reboots at this simulated time: its clock starts again from 0.
+    garbage_stamp_at_s : float, optional
+        The first report at or after this time is stamped 0xFFFFFFFF (ODOMETRY and
+        LOCAL_POSITION_NED), as a broken sender does.
     icao_address : int, default 0xA00000 + system id (ADSB)
     emitter_type : int, default 14 (ADSB_EMITTER_TYPE_UAV)
 """
@@ -142,6 +147,8 @@ class Obstacle:
     clock_drift: float = 0.0
     icao_address: int | None = None
     emitter_type: int = 14
+    clock_reboot_at_s: float | None = None
+    garbage_stamp_at_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -191,6 +198,7 @@ _OBSTACLE_KEYS = {
     "name", "radius_m", "start_ned_m", "velocity_ned_mps", "waypoints_ned_m", "speed_mps", "loop",
     "measurement_cov_m2", "velocity_cov_m2ps2", "report_rate_hz", "start_delay_s",
     "transport", "message", "clock_offset_s", "clock_drift", "icao_address", "emitter_type",
+    "clock_reboot_at_s", "garbage_stamp_at_s",
 }
 #: Obstacle transports and the messages a ``"link"`` obstacle can send.
 TRANSPORTS = ("link", "adsb", "api")
@@ -379,6 +387,8 @@ def _obstacle(src: str, index: int, raw: Any) -> Obstacle:
         clock_drift=s.number("clock_drift", 0.0, lo=-0.1, hi=0.1),
         icao_address=s.integer("icao_address", 0, lo=1, hi=0xFFFFFF) if s.has("icao_address") else None,
         emitter_type=s.integer("emitter_type", 14, lo=0, hi=19),
+        clock_reboot_at_s=s.number("clock_reboot_at_s", lo=0.0) if s.has("clock_reboot_at_s") else None,
+        garbage_stamp_at_s=s.number("garbage_stamp_at_s", lo=0.0) if s.has("garbage_stamp_at_s") else None,
     )
 
 

@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     obstacle_links = []
     try:
         for i, url in enumerate((*scenario.traffic.obstacle_links, *args.obstacles)):
-            obstacle_links.append(open_link(url, clock=microsecond_clock, name=obstacle_link_name(i), receive_only=True))
+            obstacle_links.append(open_link(url, clock=microsecond_clock, tlog=link.tlog, name=obstacle_link_name(i), receive_only=True))
     except Exception:
         for ob in obstacle_links:
             ob.close()

@@ -23,7 +23,9 @@ restart that source's track too (:attr:`Mapped.restarted`); a track is never fro
 by one bad stamp.
 
 Future. A mapped time later than the arrival time is clamped to the arrival time
-(:attr:`Mapped.clamped`): a report cannot describe the future.
+(:attr:`Mapped.clamped`): a report cannot describe the future. A stamp more than
+``future_s`` ahead of the envelope (but within ``jump_s``) is clamped and kept out of
+the offset estimate, so one bad stamp cannot drag the mapping.
 
 Pure: no clocks, no threads. Stamps are kept as exact integers relative to the
 first stamp of the epoch, so microsecond stamps of any magnitude (uint64) map
@@ -45,7 +47,8 @@ DEFAULT_WINDOW_S = 10.0
 DEFAULT_BIN_S = 1.0
 DEFAULT_JUMP_S = 1.0
 _CLAMP_REPORT_S = 1e-3  # futures below this are rounding of the envelope line: clamped, not reported
-_MAX_BINS = 64  # bounds the history whatever window/bin ratio is configured
+_MAX_BINS = 64
+_MAX_DRIFT = 0.1  # a clock 10 % off is broken, not drifting  # bounds the history whatever window/bin ratio is configured
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,9 @@ class SourceClock:
         A residual larger than this (either sign) restarts the mapping (default 1 s).
     min_bins_for_drift : int
         Bins needed before a drift is fitted (default 3).
+    future_s : float
+        A stamp more than this ahead of the envelope (but within ``jump_s``) is a report
+        from the future: clamped to its arrival and not used for the offset (default 0.1 s).
     """
 
     def __init__(
@@ -97,6 +103,7 @@ class SourceClock:
         bin_s: float = DEFAULT_BIN_S,
         jump_s: float = DEFAULT_JUMP_S,
         min_bins_for_drift: int = 3,
+        future_s: float = 0.1,
     ) -> None:
         if not (window_s > 0 and bin_s > 0 and jump_s > 0):
             raise ValueError(f"clock window, bin and jump must be > 0 s, got {window_s}, {bin_s}, {jump_s}")
@@ -104,6 +111,7 @@ class SourceClock:
         self.bin_s = float(bin_s)
         self.jump_s = float(jump_s)
         self.min_bins_for_drift = max(2, int(min_bins_for_drift))
+        self.future_s = float(future_s)
         self.epochs = 0
         self._origin: int | float | None = None  # raw stamp that starts the epoch
         self._unit = 1.0
@@ -127,6 +135,7 @@ class SourceClock:
         tc = t - t.mean()
         denom = float(np.dot(tc, tc))
         drift = float(np.dot(tc, off - off.mean()) / denom) if denom > 1e-12 else 0.0
+        drift = max(-_MAX_DRIFT, min(_MAX_DRIFT, drift))
         line = off.mean() + drift * tc
         lower = float(off.mean() - np.max(line - off))  # lower the line onto the envelope
         return lower + drift * (t_rx - t.mean()), drift
@@ -156,6 +165,9 @@ class SourceClock:
                 logger.info("clock jump of %.3f s (stamp %r): restarting the mapping", -residual, raw)
                 restarted = self._restart(raw, unit_s)
                 rel = 0.0
+            elif residual < -self.future_s:
+                # Stamped ahead of every other report: clamped, and kept out of the envelope.
+                return Mapped(t_s=t_rx, restarted=False, clamped=True, offset_s=est[0], drift=est[1])
         self._add(t_rx, t_rx - rel)
         offset, drift = self.estimate(t_rx)  # type: ignore[misc]  # just added a point
         t_map = rel + offset

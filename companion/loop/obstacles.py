@@ -14,8 +14,9 @@ Routing (by link role, then system id, then ICAO address):
 
 Tracks are keyed by identity: ``("icao", address)`` for ADSB on any link (so the two copies
 PX4 delivers are one aircraft; a copy within 2 LSB of lat/lon, 1 cm of altitude and 1 s of
-the previous report is a duplicate, counted and dropped), ``(link, "uas", id)`` for UTM and
-Remote ID reports that carry one, ``(link, "system", sysid, compid)`` otherwise.
+the previous report is a duplicate, counted and dropped), ``("uas", id, link)`` for UTM and
+Remote ID reports that carry one, ``(sysid, compid, link)`` otherwise (so ``key[0]`` is the
+system id, as for the autopilot's own ``(sysid, compid)``).
 
 Time: each identity's stamps are mapped onto link time by its own
 :class:`~companion.loop.clocks.SourceClock` (ADSB carries no stamp: arrival minus ``tslc``),
@@ -39,7 +40,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.loop.clocks import SourceClock
-from companion.loop.traffic_config import AUTOPILOT_LINK, SourcePolicy, TrafficConfig
+from companion.loop.traffic_config import AUTOPILOT_LINK, SourcePolicy, TrafficConfig, obstacle_link_name
 from companion.mavlink import messages, traffic
 from companion.mavlink.link import Received
 
@@ -51,6 +52,29 @@ _DUPLICATE_WINDOW_S = 1.0
 _DUPLICATE_LATLON_LSB = 2  # PX4 truncates lat/lon of what it re-streams by about 1 cm (1 LSB)
 _MAX_SOURCES = 1024  # bounds per-source state whatever arrives
 Severity = int
+
+
+def replay_link(msg, autopilot: tuple[int, int] | None) -> str:
+    """The link a logged message most likely came in on, for replay (a tlog does not say).
+
+    Obstacle kinds (all traffic but ADSB_VEHICLE, which the autopilot's link carries) from a
+    system other than the autopilot's (once known) are taken as from the first obstacle link, where a
+    companion records them; everything else as from the autopilot link.
+    """
+    mtype = msg.get_type()
+    if mtype in traffic.TRAFFIC_KINDS and mtype != "ADSB_VEHICLE":
+        if autopilot is not None and msg.get_srcSystem() != autopilot[0]:
+            return obstacle_link_name(0)
+    return AUTOPILOT_LINK
+
+
+def _track_key(link: str, identity: tuple) -> tuple:
+    """The tracker key of a report's identity on ``link`` (see the module docstring)."""
+    if identity[0] == "icao":
+        return identity
+    if identity[0] == "uas":
+        return ("uas", identity[1], link)
+    return (identity[1], identity[2], link)
 
 
 def _reason_code(reason: str) -> str:
@@ -160,7 +184,7 @@ class ObstacleIntake:
         if icao is not None and self._is_duplicate(icao, msg, rx.t_s):
             self.duplicates += 1
             return
-        track = ("icao", icao) if icao is not None else (link, *decoded.identity)
+        track = _track_key(link, decoded.identity)
         self._fuse(track, source, decoded, policy, rx.t_s)
 
     def _is_duplicate(self, icao: int, msg, t_rx: float) -> bool:

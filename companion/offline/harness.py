@@ -85,7 +85,9 @@ def run_lockstep(
     companion = Companion(scenario, offboard=offboard)
     link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path)
     # Obstacles with transport = "link" arrive on their own receive-only link, as on a vehicle.
-    obstacle_link = MemoryLink(clock=lambda: sim.time_s, name="obstacles1", receive_only=True) if sim.has_obstacle_link else None
+    # Recorded in the same tlog (replay routes other systems' traffic back to an obstacle link).
+    obstacle_link = (MemoryLink(clock=lambda: sim.time_s, name="obstacles1", receive_only=True, tlog=link.tlog)
+                     if sim.has_obstacle_link else None)
     rng = np.random.default_rng([seed, 0xC0FFEE])
     dt = 1.0 / scenario.loop.setpoint_rate_hz
     limit = scenario.duration_s if duration_s is None else float(duration_s)

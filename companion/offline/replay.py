@@ -64,6 +64,7 @@ from companion.mavlink.link import DEFAULT_SOURCE_COMPONENT, DEFAULT_SOURCE_SYST
 from companion.mavlink.offboard import OffboardConfig, Phase, SequencerState
 from companion.loop.config import load_scenario
 from companion.mavlink.tlog import LOCKSTEP_EPOCH_S, read_tlog
+from companion.loop.obstacles import replay_link
 
 logger = logging.getLogger(__name__)
 
@@ -368,7 +369,7 @@ def replay(
     unmatched = mismatches = ticks = 0
     for ev in events:
         if isinstance(ev, _Rec):
-            companion.handle(Received(ev.t_us * 1e-6, ev.msg, ev.raw))
+            companion.handle(Received(ev.t_us * 1e-6, ev.msg, ev.raw, replay_link(ev.msg, companion.autopilot)))
             continue
         t = ev.t_us * 1e-6
         out = companion.tick(t)

@@ -43,7 +43,7 @@ def companion_report(companion: Companion) -> dict:
         "solve_time_p99_ms": float(np.percentile(solve, 99) * 1e3) if solve.size else None,
         "stale_events": state.stale_events,
         "messages_rejected": state.messages_rejected,
-        "obstacle_reports_rejected": state.obstacle_rejections,
+        "obstacle_reports_rejected": state.obstacle_rejections + companion.obstacles.summary()["rejected_total"],
         "tracks": len(companion.tracker),
         "obstacle_intake": companion.obstacles.summary(),
         "failsafe_events": [(round(t, 2), text) for t, text in state.events if any(w in text for w in _FAILSAFE_WORDS)],

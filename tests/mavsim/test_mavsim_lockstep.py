@@ -293,7 +293,7 @@ def test_that_walls_count_as_collisions():
 
 def test_that_the_same_seed_gives_byte_identical_tlogs(tmp_path):
     def flight(seed, path):
-        c = Client(with_obstacles(AIRBORNE, 3), seed=seed, tlog=path)
+        c = Client(with_obstacles(AIRBORNE, 3, transport="adsb"), seed=seed, tlog=path)  # ADSB: on the API link
         c.run(1.0, vel_sp(0.5))
         c.set_mode_offboard(vel_sp(0.5))
         c.run(2.0, vel_sp(0.5, 0.2))
@@ -309,7 +309,7 @@ def test_that_the_same_seed_gives_byte_identical_tlogs(tmp_path):
     while (m := log.recv_match()) is not None:
         types.add((m.get_srcSystem(), m.get_type()))
         stamps.append(m._timestamp)
-    assert {(245, "SET_POSITION_TARGET_LOCAL_NED"), (1, "COMMAND_ACK"), (101, "ODOMETRY")} <= types
+    assert {(245, "SET_POSITION_TARGET_LOCAL_NED"), (1, "COMMAND_ACK"), (1, "ADSB_VEHICLE"), (101, "ADSB_VEHICLE")} <= types
     assert stamps == sorted(stamps) and stamps[0] == pytest.approx(1_704_067_200.0)
 
 

@@ -28,8 +28,9 @@ def free_port() -> int:
 SCENARIO = {
     "vehicle": {"start_ned_m": [0.0, 0.0, -5.0]},
     "world": {"obstacles": [
-        {"name": "o1", "start_ned_m": [20.0, 0.0, -5.0], "velocity_ned_mps": [-0.5, 0.0, 0.0]},
-        {"name": "o2", "start_ned_m": [20.0, 5.0, -5.0], "velocity_ned_mps": [-0.5, 0.0, 0.0]},
+        # On the API link (the old way): the client must still pick the autopilot out of them.
+        {"name": "o1", "start_ned_m": [20.0, 0.0, -5.0], "velocity_ned_mps": [-0.5, 0.0, 0.0], "transport": "api"},
+        {"name": "o2", "start_ned_m": [20.0, 5.0, -5.0], "velocity_ned_mps": [-0.5, 0.0, 0.0], "transport": "api"},
     ]},
 }
 

@@ -18,9 +18,10 @@ AIRBORNE = {"vehicle": {"start_ned_m": [0.0, 0.0, -5.0]}}
 GROUND = {"vehicle": {"start_ned_m": [0.0, 0.0, 0.0]}}
 
 
-def with_obstacles(base: dict, n: int = 1) -> dict:
+def with_obstacles(base: dict, n: int = 1, **fields) -> dict:
+    """``base`` with ``n`` obstacles flying south; ``fields`` set more keys of each (e.g. ``transport``)."""
     obs = [{"name": f"o{i + 1}", "start_ned_m": [10.0 + i, 5.0 * i, -5.0], "velocity_ned_mps": [-0.5, 0.0, 0.0],
-            "measurement_cov_m2": [[0.02, 0, 0], [0, 0.03, 0], [0, 0, 0.04]]} for i in range(n)]
+            "measurement_cov_m2": [[0.02, 0, 0], [0, 0.03, 0], [0, 0, 0.04]], **fields} for i in range(n)]
     return {**base, "world": {"obstacles": obs}}
 
 
@@ -47,7 +48,8 @@ class Client:
         while self.sim.time_s < t_end - 1e-9:
             if setpoint is not None:
                 self.send(setpoint())
-            for t, data in self.sim.advance(min(step, t_end - self.sim.time_s)):
+            api = self.sim.advance(min(step, t_end - self.sim.time_s))
+            for t, data in sorted(api + self.sim.take_obstacle_packets(), key=lambda tp: tp[0]):  # both ports
                 for m in self.dec.parse_buffer(data) or []:
                     got.append((t, m))
         self.log += got
