@@ -237,7 +237,7 @@ def test_that_the_companion_only_learns_obstacles_over_mavlink(tmp_path):
     run = res["run"]
     tracks = set(run.companion.tracker.keys())
     n = len(data["world"]["obstacles"])
-    assert tracks == {(101 + i, 197) for i in range(n)}  # one MAVLink system per scripted obstacle
+    assert tracks == {(101 + i, 197, "obstacles1") for i in range(n)}  # one MAVLink system per obstacle, on its link
     assert len(run.extra["replan_truth"]) == len(run.companion.records)
     with LockstepSimulator(data, seed=res["sim_seed"]) as sim:  # the dict itself also drives mavsim
         assert len(sim.truth.obstacle_positions_ned_m) == n
