@@ -367,7 +367,7 @@ class Companion:
                 np.broadcast_to(cov_now, (len(keys), 3, 3)),
                 np.array([now_pos[k] for k in keys]),
                 np.array([now_cov[k] for k in keys]),
-                self.cfg.drone_radius_m + self.loop.obstacle_radius_m,
+                self.cfg.drone_radius_m + np.array([self.obstacles.radius(k) for k in keys]),
             )
             realised = {k: float(v) for k, v in zip(keys, np.atleast_1d(ct))}
         if realised:

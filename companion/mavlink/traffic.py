@@ -31,8 +31,9 @@ OPEN_DRONE_ID_LOCATION      accuracy categories (MAV_ODID_HOR_ACC, _VER_ACC, _SP
 
 Global to local. PX4 maps its local frame to latitude and longitude with an azimuthal
 equidistant projection on a sphere of 6,371 km about the local origin (PX4
-``lib/geo``). :func:`global_to_ned` inverts the same projection, so a position PX4
-re-streams comes back where PX4 had it (a WGS-84 model would differ by 0.29 %).
+``lib/geo``). :func:`global_to_ned` is the same projection (the forward map is
+``mavsim.geo.ned_to_global``), so a position PX4 re-streams comes back where PX4 had it
+(a WGS-84 model would differ by 0.29 %).
 Altitudes are AMSL: NED z = origin altitude - altitude.
 """
 
@@ -167,20 +168,6 @@ def global_to_ned(lat_deg: float, lon_deg: float, alt_m: float, origin: GlobalOr
     north = k * (math.cos(lat0) * sin_lat - math.sin(lat0) * cos_lat * cos_dlon) * EARTH_RADIUS_M
     east = k * cos_lat * math.sin(lon - lon0) * EARTH_RADIUS_M
     return np.array([north, east, origin.alt_m - alt_m])
-
-
-def ned_to_global(position_ned, origin: GlobalOrigin) -> tuple[float, float, float]:
-    """Local NED metres to (lat deg, lon deg, alt m AMSL): the inverse of :func:`global_to_ned`."""
-    x, y = float(position_ned[0]) / EARTH_RADIUS_M, float(position_ned[1]) / EARTH_RADIUS_M
-    lat0, lon0 = math.radians(origin.lat_deg), math.radians(origin.lon_deg)
-    c = math.hypot(x, y)
-    if c > 0.0:
-        sin_c, cos_c = math.sin(c), math.cos(c)
-        lat = math.asin(cos_c * math.sin(lat0) + x * sin_c * math.cos(lat0) / c)
-        lon = lon0 + math.atan2(y * sin_c, c * math.cos(lat0) * cos_c - x * math.sin(lat0) * sin_c)
-    else:
-        lat, lon = lat0, lon0
-    return math.degrees(lat), math.degrees(lon), origin.alt_m - float(position_ned[2])
 
 
 def decode_origin(msg: mavlink2.MAVLink_gps_global_origin_message) -> GlobalOrigin:

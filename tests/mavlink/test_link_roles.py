@@ -36,6 +36,17 @@ def _drain(sock: socket.socket) -> int:
         return n
 
 
+def _hear(link, n: int) -> set:
+    """Poll ``link`` until ``n`` messages arrived (2 s at most); the senders' system ids."""
+    deadline, seen, count = time.monotonic() + 2.0, set(), 0
+    while count < n and time.monotonic() < deadline:
+        got = link.poll()
+        count += len(got)
+        seen |= {rx.msg.get_srcSystem() for rx in got}
+        time.sleep(0.01)
+    return seen
+
+
 def test_that_an_obstacle_link_is_receive_only_and_tags_what_it_receives():
     link = MemoryLink(clock=lambda: 0.0, name="obstacles1", receive_only=True)
     sender = mavlink2.MAVLink(None, 101, 197)
@@ -56,12 +67,7 @@ def test_that_a_udpin_link_sends_only_to_the_autopilots_address_never_to_every_a
         autopilot.sendto(mavlink2.MAVLink_heartbeat_message(2, 12, 1, 0, 3, 3).pack(ap_mav), ("127.0.0.1", port))
         time.sleep(0.05)
         rogue.sendto(mavlink2.MAVLink_heartbeat_message(0, 8, 0, 0, 4, 3).pack(rogue_mav), ("127.0.0.1", port))
-        deadline = time.monotonic() + 2.0
-        seen = set()
-        while len(seen) < 2 and time.monotonic() < deadline:
-            seen |= {rx.msg.get_srcSystem() for rx in link.poll()}
-            time.sleep(0.01)
-        assert seen == {1, 150}
+        assert _hear(link, 2) == {1, 150}
         assert all(rx.link == "autopilot" for rx in link.poll())
         link.peer = (1, 1)  # the loop sets the autopilot it follows
         for _ in range(5):
@@ -86,11 +92,7 @@ def test_that_before_the_autopilot_is_known_a_udpin_link_answers_the_last_addres
         for sock, mav in ((first, first_mav), (last, last_mav)):
             sock.sendto(mavlink2.MAVLink_heartbeat_message(0, 8, 0, 0, 4, 3).pack(mav), ("127.0.0.1", port))
             time.sleep(0.05)
-        deadline = time.monotonic() + 2.0
-        n = 0
-        while n < 2 and time.monotonic() < deadline:
-            n += len(link.poll())
-            time.sleep(0.01)
+        assert _hear(link, 2) == {9, 10}
         link.send(messages.companion_heartbeat())
         assert _drain(last) == 1 and _drain(first) == 0
     finally:
