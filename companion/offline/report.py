@@ -108,6 +108,12 @@ def format_report(report: dict) -> str:
     ]
     width = max(len(label) for _, label in order)
     lines = [f"{label.ljust(width)}  {_fmt(report.get(key))}" for key, label in order if key in report]
+    intake = report.get("obstacle_intake")
+    if intake:  # every rejected obstacle report, per source and reason (a silent drop is a defect)
+        lines.append(f"{'obstacle reports accepted'.ljust(width)}  {sum(intake['accepted'].values())} from {len(intake['accepted'])} sources")
+        lines.append(f"{'obstacle reports rejected'.ljust(width)}  {intake['rejected_total']}")
+        lines.extend(f"  {n:6d}  {why}" for why, n in intake["rejected"].items())
+        lines.extend(f"  warning: {w}" for w in intake["warnings"])
     fs = report.get("failsafe_events") or []
     lines.append(f"{'failsafe events'.ljust(width)}  {len(fs)}")
     for t, text in fs:
