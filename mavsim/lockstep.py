@@ -43,7 +43,8 @@ class LockstepSimulator:
     scenario : Scenario, dict (parsed TOML) or path
     seed : int
     tlog : path or None
-        Record every packet sent and received on the API link (stamped with
+        Record every packet sent and received on the API link, and sent on the obstacle
+        link (stamped with
         :data:`mavsim.tlog.LOCKSTEP_EPOCH_US` plus simulated time).
     """
 
@@ -90,9 +91,10 @@ class LockstepSimulator:
         packets = self._sim.advance_to(self._sim.now_us + round(dt_s * 1e6))
         api = [(t_us, data) for t_us, link, data in packets if link == "api"]
         self._obstacle_packets.extend((t_us * 1e-6, data) for t_us, link, data in packets if link == OBSTACLE_LINK)
-        if self._tlog is not None:
-            for t_us, data in api:
-                self._tlog.write(LOCKSTEP_EPOCH_US + t_us, data)
+        if self._tlog is not None:  # the API link and the obstacle link: what a companion hears
+            for t_us, link, data in packets:
+                if link in ("api", OBSTACLE_LINK):
+                    self._tlog.write(LOCKSTEP_EPOCH_US + t_us, data)
         return [(t_us * 1e-6, data) for t_us, data in api]
 
     @property

@@ -27,7 +27,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-from mavsim.core import Simulator
+from mavsim.core import OBSTACLE_LINK, Simulator
 from mavsim.errors import SimulationError
 from mavsim.tlog import TlogWriter
 
@@ -78,7 +78,7 @@ class UdpServer:
     speed : float
         Simulated seconds per wall second (> 0).
     tlog : path or None
-        Record every packet sent and received on the API link, stamped with the wall
+        Record every packet sent and received on the API link (and sent on the obstacle link), stamped with the wall
         clock (microseconds since the Unix epoch).
     """
 
@@ -115,7 +115,7 @@ class UdpServer:
     def _send(self, packets) -> None:
         for _, name, data in packets:
             self._links[name].send(data)
-            if name == self._api and self._tlog is not None:
+            if name in (self._api, OBSTACLE_LINK) and self._tlog is not None:
                 self._tlog.write(time.time_ns() // 1000, data)
 
     def run(self, duration_s: float | None = None) -> None:
