@@ -33,6 +33,10 @@ def antipodal_variant(name: str, directory: Path) -> Path:
     """Write the antipodal scenario with transport ``name`` (see :data:`TRANSPORTS`) and return its path."""
     text = ANTIPODAL.read_text()
     head, *obstacles = text.split("[[world.obstacles]]\n")
+    if name in _TRAFFIC and "\n[traffic]\n" in head:  # the variant's own [traffic] replaces the shipped one
+        start = head.index("\n[traffic]\n") + 1
+        end = head.index("\n[", start) + 1
+        head = head[:start] + head[end:]
     extra = TRANSPORTS[name]
     out = head.rstrip() + "\n" + _TRAFFIC.get(name, "") + "\n"
     for i, body in enumerate(obstacles):
