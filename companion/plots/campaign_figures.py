@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any, Mapping
 
 import matplotlib
 
@@ -14,15 +15,16 @@ import numpy as np  # noqa: E402
 logger = logging.getLogger(__name__)
 
 
-def plot_campaign(summary: dict, directory: str | Path, *, c_min: float, title: str = "campaign") -> list[Path]:
+def plot_campaign(summary: Mapping[str, Any], directory: str | Path, *, c_min: float, title: str = "campaign") -> list[Path]:
     """Draw ``collision_rate.png`` and ``min_contour_ecdf.png`` into ``directory``.
 
     Parameters
     ----------
-    summary : dict
-        Per-method summaries (:func:`companion.offline.campaign.summarise`): ``collision_rate``,
-        ``collision_ci95``, ``episodes``, ``min_realised_contour`` (one value per episode,
-        ``None`` when no obstacle came within sensing range).
+    summary : mapping of method name to summary
+        Per-method summaries (``MethodSummary`` of :mod:`companion.offline.campaign.stats`,
+        read by attribute): ``collision_rate``, ``collision_ci95``, ``collisions``,
+        ``episodes``, ``min_realised_contour`` (one value per episode, ``None`` when no
+        obstacle came within sensing range).
     directory : output folder (created).
     c_min : the contour of touch the constraint protects (drawn as a line).
     title : figure title prefix.
@@ -38,15 +40,15 @@ def plot_campaign(summary: dict, directory: str | Path, *, c_min: float, title: 
     written = []
 
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
-    rates = np.array([summary[m]["collision_rate"] or 0.0 for m in methods])
-    ci = np.array([summary[m]["collision_ci95"] for m in methods]).reshape(-1, 2)
+    rates = np.array([summary[m].collision_rate or 0.0 for m in methods])
+    ci = np.array([summary[m].collision_ci95 for m in methods]).reshape(-1, 2)
     x = np.arange(len(methods))
     ax.bar(x, rates, color="tab:blue", alpha=0.7)
     ax.errorbar(x, rates, yerr=[rates - ci[:, 0], ci[:, 1] - rates], fmt="none", ecolor="k", capsize=5,
                 label="95 % Clopper-Pearson")
     for xi, m in zip(x, methods):
         s = summary[m]
-        ax.annotate(f"{s['collisions']}/{s['episodes']}", (xi, ci[xi, 1]), textcoords="offset points", xytext=(0, 4),
+        ax.annotate(f"{s.collisions}/{s.episodes}", (xi, ci[xi, 1]), textcoords="offset points", xytext=(0, 4),
                     ha="center", fontsize=8)
     ax.set_xticks(x, methods)
     ax.set_ylabel("episodes with a collision")
@@ -62,7 +64,7 @@ def plot_campaign(summary: dict, directory: str | Path, *, c_min: float, title: 
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
     styles = ("-", "--", "-.", ":")
     for i, m in enumerate(methods):
-        values = np.sort([v for v in summary[m]["min_realised_contour"] if v is not None])
+        values = np.sort([v for v in summary[m].min_realised_contour if v is not None])
         if values.size:
             # ECDF, closed on the right at c = 1 (most episodes never come near: c = 1.0)
             x = np.concatenate([[0.0], values, [1.0]])

@@ -172,26 +172,26 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
     run = SimpleNamespace(truth={"collided": True, "collisions": contacts, "goal_reached": False},
                           companion=SimpleNamespace(records=records), extra={"replan_truth": truth_at}, sim_time_s=1.0)
     s = score_run(run, data)
-    assert s["steps"] == 3 and s["replans"] == 4
-    assert s["pair_steps_in_range"] == 1 + 2 + 2
-    assert s["pair_step_collisions"] == 1
-    assert s["contour_pairs"] == 5 and s["contour_pairs_below_c_min"] == 2 and s["steps_below_c_min"] == 2
-    assert s["min_realised_contour"] == 0.0
-    assert s["failed_plans"] == 1 and s["slack_plans"] == 1
+    assert s.steps == 3 and s.replans == 4
+    assert s.pair_steps_in_range == 1 + 2 + 2
+    assert s.pair_step_collisions == 1
+    assert s.contour_pairs == 5 and s.contour_pairs_below_c_min == 2 and s.steps_below_c_min == 2
+    assert s.min_realised_contour == 0.0
+    assert s.failed_plans == 1 and s.slack_plans == 1
     # near pairs (contour < 0.99): a@0.3 (hit), b@0.3, a@0.6, b@0.6 (0.85 m >= 0.8 m: miss)
-    assert s["active_pairs"] == 4 and s["active_pair_collisions"] == 1
+    assert s.active_pairs == 4 and s.active_pair_collisions == 1
     # Phi(-r(c)) summed over the in-range pairs; c = 1.0 contributes nothing
     # (c = 0: the inflated ellipsoids overlap, Phi(0) = 1/2)
     expected = sum(float(norm.cdf(-touch_radius(c, 3))) for c in (0.99, 0.2, 0.95, 0.95)) + 0.5
-    assert s["predicted_collisions_bound"] == pytest.approx(expected)
+    assert s.predicted_collisions_bound == pytest.approx(expected)
     # NEES e' (S_d + S_o)^-1 e of the relative position: errors 0, 0.05, 0, 0, 0.15 m over 0.02 m^2
-    assert s["relative_nees"] == pytest.approx([0.0, 0.05**2 / 0.02, 0.0, 0.0, 0.15**2 / 0.02])
-    assert s["drone_nees"] == [0.0, 0.0, 0.0]
+    assert s.relative_nees == pytest.approx([0.0, 0.05**2 / 0.02, 0.0, 0.0, 0.15**2 / 0.02])
+    assert s.drone_nees == [0.0, 0.0, 0.0]
     # the drone truly stood still while each plan moved it 0.3 m over the first step
-    assert s["model_step_error_m"] == pytest.approx([0.3, 0.3])
-    assert s["obstacle_collision"] and s["collided"] and s["collisions"] == 3
-    assert s["contact_time_s"] == pytest.approx(0.15 + 0.1)  # walls are not obstacles
-    assert s["pair_time_in_range_s"] == pytest.approx(5 * 0.3)
+    assert s.model_step_error_m == pytest.approx([0.3, 0.3])
+    assert s.obstacle_collision and s.collided and s.collisions == 3
+    assert s.contact_time_s == pytest.approx(0.15 + 0.1)  # walls are not obstacles
+    assert s.pair_time_in_range_s == pytest.approx(5 * 0.3)
 
 
 # --------------------------------------------------------------------------- closed loop
@@ -204,14 +204,14 @@ def tiny_campaign():
 
 def test_that_a_tiny_campaign_runs_and_reports_every_method(tiny_campaign, tmp_path):
     res = tiny_campaign
-    assert [(r["episode"], r["method"]) for r in res.results] == [(0, "hyperplane"), (0, "deterministic"), (1, "hyperplane"), (1, "deterministic")]
-    assert all("error" not in r for r in res.results)
+    assert [(r.episode, r.method) for r in res.results] == [(0, "hyperplane"), (0, "deterministic"), (1, "hyperplane"), (1, "deterministic")]
+    assert all(r.error is None and r.score is not None for r in res.results)
     for m in ("hyperplane", "deterministic"):
         s = res.summary[m]
-        assert s["episodes"] == 2 and s["errors"] == 0
-        assert s["collision_ci95"] == pytest.approx(clopper_pearson(s["collisions"], 2))
-        assert s["steps"] > 0 and s["solve_time_median_ms"] > 0
-        assert s["bound_phi_minus_r_min"] == pytest.approx(collision_bound(0.90))
+        assert s.episodes == 2 and s.errors == 0
+        assert s.collision_ci95 == pytest.approx(clopper_pearson(s.collisions, 2))
+        assert s.steps > 0 and s.solve_time_median_ms > 0
+        assert s.bound_phi_minus_r_min == pytest.approx(collision_bound(0.90))
     table = format_table(res)
     assert "hyperplane" in table and "deterministic" in table and "Phi(-r_min)" in table
     doc = json.loads(json.dumps(res.to_json(), allow_nan=False))  # strict JSON: no inf/NaN
@@ -224,22 +224,21 @@ def test_that_a_tiny_campaign_runs_and_reports_every_method(tiny_campaign, tmp_p
 def test_that_rerunning_one_episode_by_index_gives_the_same_result(tiny_campaign):
     row = tiny_campaign.results[2]  # episode 1, hyperplane, flown inside the campaign
     again = run_episode(EpisodeTask("antipodal", 4, 1, "hyperplane", duration_s=SHORT_S))
-    assert again["truth"] == row["truth"]
-    assert again["commands_sha256"] == row["commands_sha256"]
-    assert again["sim_seed"] == row["sim_seed"] == episode_sim_seed(4, 1)
-    for key in ("steps", "pair_steps_in_range", "pair_step_collisions", "min_realised_contour", "replans"):
-        assert again[key] == row[key]
+    assert again.score.truth == row.score.truth
+    assert again.score.commands_sha256 == row.score.commands_sha256
+    assert again.sim_seed == row.sim_seed == episode_sim_seed(4, 1)
+    assert again.reproducible_json() == row.reproducible_json()  # every field but the host's timings
 
 
 def test_that_the_companion_only_learns_obstacles_over_mavlink(tmp_path):
     data = generate_scenario("crossing", 2, 0, duration_s=6.0)
     res = run_episode(EpisodeTask("crossing", 2, 0, "hyperplane", duration_s=6.0), keep_records=True)
-    run = res["run"]
+    run = res.run
     tracks = set(run.companion.tracker.keys())
     n = len(data["world"]["obstacles"])
     assert tracks == {(101 + i, 197) for i in range(n)}  # one MAVLink system per scripted obstacle
     assert len(run.extra["replan_truth"]) == len(run.companion.records)
-    with LockstepSimulator(data, seed=res["sim_seed"]) as sim:  # the dict itself also drives mavsim
+    with LockstepSimulator(data, seed=res.sim_seed) as sim:  # the dict itself also drives mavsim
         assert len(sim.truth.obstacle_positions_ned_m) == n
 
 
@@ -269,11 +268,12 @@ def test_that_chance_constrained_methods_keep_their_promise_in_a_real_campaign()
     """
     res = run_campaign("antipodal", range(100, 140), list(METHODS), 1, workers=os.cpu_count(), progress=False)
     print(format_table(res))
-    assert res.summary["hyperplane"]["collisions"] == 0
+    assert res.summary["hyperplane"].collisions == 0
     for m in ("hyperplane", "paper"):
         s = res.summary[m]
-        assert s["errors"] == 0
-        hit_while_planning = [r["episode"] for r in res.results if r["method"] == m and r["collided"] and r["failed_plans"] == 0]
+        assert s.errors == 0
+        hit_while_planning = [r.episode for r in res.results
+                              if r.method == m and r.score.collided and r.score.failed_plans == 0]
         assert hit_while_planning == [], f"{m}: collision without a planner failure in episodes {hit_while_planning}"
-        assert s["pair_step_frequency"] <= s["bound_phi_minus_r_min"]
-    assert res.summary["deterministic"]["share_pairs_below_c_min"] > res.summary["hyperplane"]["share_pairs_below_c_min"]
+        assert s.pair_step_frequency <= s.bound_phi_minus_r_min
+    assert res.summary["deterministic"].share_pairs_below_c_min > res.summary["hyperplane"].share_pairs_below_c_min

@@ -7,7 +7,8 @@ from companion.loop.app import Companion
 from companion.cli import main
 from companion.offline.harness import run_lockstep
 from companion.core.overlap import touch_radius
-from companion.plots.flight_figures import slice_ellipse, write_flight_figures
+from companion.plots.ellipses import slice_ellipse
+from companion.plots.flight_figures import write_flight_figures
 from companion.loop.config import load_scenario
 
 SCENARIO = "configs/antipodal.toml"
