@@ -94,7 +94,7 @@ def open_executor(workers: int, scheduler: str | None = None) -> Iterator[tuple[
         try:
             n = len(client.scheduler_info().get("workers", {}))
             logger.info("Dask scheduler %s: %d worker(s)", scheduler, n)
-            yield client.get_executor(), n
+            yield client.get_executor(pure=False), n
         finally:
             client.close()
     elif workers == 1:

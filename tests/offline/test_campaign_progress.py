@@ -1,0 +1,71 @@
+"""Campaign progress: a bar with runs done, rate and time left; a one-line log off a terminal."""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+
+from companion.offline.campaign import EpisodeResult, EpisodeScore
+from companion.offline.campaign.progress import Progress
+
+
+def _result(collided: bool | None) -> EpisodeResult:
+    score = None
+    if collided is not None:
+        score = EpisodeScore(
+            n_obstacles=1, collided=collided, obstacle_collision=collided, collisions=int(collided),
+            min_true_clearance_m=0.1, goal_reached=True, time_to_goal_s=9.0, steps=10, pair_steps_in_range=5,
+            pair_step_collisions=0, pair_time_in_range_s=1.5, contact_time_s=0.0, contour_pairs=5,
+            contour_pairs_below_c_min=0, steps_below_c_min=0, min_realised_contour=0.95, active_pairs=1,
+            active_pair_collisions=0, predicted_collisions_bound=0.01, drone_nees=[1.0], relative_nees=[2.0],
+            model_step_error_m=[0.01], replans=10, failed_plans=0, slack_plans=0, slack_max=0.0,
+            solve_times_s=[0.01], sim_time_s=12.0, commands_sha256="0" * 64)
+    return EpisodeResult(episode=0, method="paper", family="antipodal", seed=1, sim_seed=2, score=score,
+                         error=None if score else "RuntimeError: x")
+
+
+class _FakeTerminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_that_off_a_terminal_progress_is_a_periodic_line_with_rate_and_time_left():
+    out = io.StringIO()
+    p = Progress("campaign antipodal", total=10, done=4, log_every_s=0.0, stream=out)
+    assert p.mode == "log"
+    for collided in (True, False, None):
+        p.update(_result(collided))
+    p.close()
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 4  # one per run (every 0 s) and one at the end
+    assert lines[-1].startswith("campaign antipodal: 7/10 runs (4 from the results file), 1 with collision, 1 error(s), ")
+    assert "runs/min" in lines[-1] and " left" in lines[-1] and "\r" not in out.getvalue()
+
+
+def test_that_a_slow_log_waits_for_its_period():
+    out = io.StringIO()
+    p = Progress("c", total=3, log_every_s=3600.0, stream=out)
+    p.update(_result(False))
+    assert out.getvalue() == ""
+    p.close()
+    assert out.getvalue().count("\n") == 1
+
+
+def test_that_on_a_terminal_progress_is_a_bar_with_done_rate_and_time_left():
+    term = _FakeTerminal()
+    p = Progress("campaign crossing", total=4, done=1, stream=term)
+    assert p.mode == "bar"
+    p.update(_result(False))
+    p.update(_result(True))
+    p.close()
+    text = term.getvalue()
+    last = text.split("\r")[-1]
+    assert last.startswith("campaign crossing:  75%") and "3/4 [" in last   # done of total
+    assert "<00:00" in last and "run/s" in last                                # elapsed<left, rate
+    assert "collisions=1, errors=0" in last
+
+
+def test_that_an_unknown_progress_mode_is_refused():
+    with pytest.raises(ValueError, match="progress mode"):
+        Progress("c", total=1, mode="fancy")
