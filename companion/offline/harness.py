@@ -22,6 +22,7 @@ from companion.loop.app import Companion
 from companion.mavlink.link import MemoryLink
 from companion.mavlink.offboard import OffboardConfig
 from companion.offline.report import run_report
+from companion.offline.slack import companion_slack_report
 from companion.loop.config import CompanionScenario, load_scenario, scenario_from_dict
 from mavsim.lockstep import LockstepSimulator
 from mavsim.scenario import scenario_from_dict as sim_scenario_from_dict
@@ -47,8 +48,10 @@ class RunResult:
     extra: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
-        """The numbers ``companion demo`` prints (JSON-serialisable): truth plus the companion's view."""
-        return {"seed": self.seed, "dropped_packets": self.dropped_packets, **run_report(self.companion, self.truth)}
+        """The numbers ``companion demo`` prints (JSON-serialisable): truth plus the companion's view,
+        and under ``slack`` the slack replans and how far inside ``c_min`` they went."""
+        return {"seed": self.seed, "dropped_packets": self.dropped_packets, **run_report(self.companion, self.truth),
+                "slack": companion_slack_report(self.companion).to_json()}
 
 
 #: A scenario as ``run_lockstep`` takes it: a TOML file, or its parsed tables (``tomllib`` output).

@@ -141,7 +141,8 @@ def test_that_the_bound_is_phi_of_minus_the_touch_radius():
 
 def _record(t, drone, obstacles, contours, status="optimal"):
     drone = np.array(drone, float)
-    return SimpleNamespace(t_link_s=t, status=status, slack_max=0.0, solve_time_s=0.01, command=np.zeros(3),
+    return SimpleNamespace(t_link_s=t, status=status, slack_max=0.0 if status == "optimal" else 0.4, solve_time_s=0.01,
+                           command=np.zeros(3), planned_min_contour=min(contours.values()),
                            drone_position=drone, drone_cov=0.01 * np.eye(3), realised_contour=contours,
                            plan_positions=drone + np.array([[0.3, 0.0, 0.0]] * 28),
                            obstacle_positions={k: np.array(v, float) for k, v in obstacles.items()},
@@ -178,6 +179,10 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
     assert s.contour_pairs == 5 and s.contour_pairs_below_c_min == 2 and s.steps_below_c_min == 2
     assert s.min_realised_contour == 0.0
     assert s.failed_plans == 1 and s.slack_plans == 1
+    # the slack replan (0.3 s) started with a 0.2 contour against c_min = 0.9 (b, at 0.95, is outside c_min);
+    # in metres: r_min (0.1 + 0.1) + (0.5 + 0.5 assumed) - 0.9 along the normal (north)
+    assert s.slack_violation_contour == pytest.approx(0.7)
+    assert s.slack_violation_m == pytest.approx(touch_radius(0.9, 3) * 0.2 + 0.1)
     # near pairs (contour < 0.99): a@0.3 (hit), b@0.3, a@0.6, b@0.6 (0.85 m >= 0.8 m: miss)
     assert s.active_pairs == 4 and s.active_pair_collisions == 1
     # Phi(-r(c)) summed over the in-range pairs; c = 1.0 contributes nothing

@@ -18,7 +18,9 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2, norm
 
+from companion.loop.config import LoopConfig
 from companion.offline.campaign.jsonable import to_jsonable
+from companion.offline.slack import slack_report
 
 logger = logging.getLogger(__name__)
 
@@ -62,6 +64,8 @@ class EpisodeScore:
     failed_plans: int
     slack_plans: int
     slack_max: float
+    slack_violation_contour: float       #: deepest c_min - realised contour at a slack replan (companion.offline.slack)
+    slack_violation_m: float             #: ... and the largest missing separation, metres
     solve_times_s: list[float]
     sim_time_s: float
     commands_sha256: str
@@ -156,6 +160,8 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
                     active_hits += int(np.linalg.norm(rel_true) < radius_sum[j])
         steps_below += below_here
     statuses = [r.status for r in records]
+    radius_assumed = data["vehicle"]["radius_m"] + data.get("companion", {}).get("obstacle_radius_m", LoopConfig.obstacle_radius_m)
+    slack = slack_report(records, c_min, radius_assumed, sensing)
     commands = np.array([r.command for r in records]).reshape(-1, 3)
     obstacle_collisions = [c for c in truth.get("collisions", []) if c.get("kind") == "obstacle"]
     # continuous-time view of the same quantity: seconds in contact (truth checks every physics step)
@@ -188,6 +194,8 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
         failed_plans=statuses.count("failed"),
         slack_plans=statuses.count("slack"),
         slack_max=max((r.slack_max for r in records if r.status != "failed"), default=0.0),  # failed: inf
+        slack_violation_contour=slack.largest_violation_contour,
+        slack_violation_m=slack.largest_violation_m,
         solve_times_s=[float(r.solve_time_s) for r in records],
         sim_time_s=float(run.sim_time_s),
         commands_sha256=hashlib.sha256(np.ascontiguousarray(commands).tobytes()).hexdigest(),

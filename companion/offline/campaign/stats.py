@@ -84,6 +84,8 @@ class MethodSummary:
     slack_plans: int
     episodes_with_slack: int
     slack_max: float
+    slack_violation_contour_max: float  #: deepest c_min - realised contour at a slack replan, any episode
+    slack_violation_m_max: float  #: largest missing separation at a slack replan, metres
     solve_time_median_ms: float | None
     solve_time_p99_ms: float | None
     min_realised_contour: list[float | None]  #: one per episode (None: nothing came within range)
@@ -156,6 +158,8 @@ def summarise(results: Sequence[Any], methods: Sequence[str], c_min: float) -> d
             slack_plans=sum(r.slack_plans for r in rows),
             episodes_with_slack=sum(r.slack_plans > 0 for r in rows),
             slack_max=max((r.slack_max for r in rows), default=0.0),
+            slack_violation_contour_max=max((r.slack_violation_contour for r in rows), default=0.0),
+            slack_violation_m_max=max((r.slack_violation_m for r in rows), default=0.0),
             solve_time_median_ms=float(np.median(solve) * 1e3) if solve.size else None,
             solve_time_p99_ms=float(np.percentile(solve, 99) * 1e3) if solve.size else None,
             min_realised_contour=[r.min_realised_contour for r in rows],

@@ -57,6 +57,11 @@ def format_table(result: CampaignResult) -> str:
     lines.append(f"(step freq: true collisions per step and in-range obstacle; <c_min: share of in-range (step, obstacle) "
                  f"pairs whose realised contour of touch fell below c_min; failed: share of replans; slack: episodes "
                  f"with slack; {result.wall_time_s:.0f} s on {result.workers} worker(s))")
+    for m, s in result.summary.items():
+        if s.slack_plans:
+            lines.append(f"{m}: {s.slack_plans} slack replan(s) in {s.episodes_with_slack} episode(s), accepted and flagged; "
+                         f"deepest inside c_min: {s.slack_violation_contour_max:.3f} in contour, "
+                         f"{s.slack_violation_m_max:.3f} m of separation")
     errors = sum(s.errors for s in result.summary.values())
     if errors:
         lines.append(f"{errors} run(s) ended with an error (see the JSON file)")
