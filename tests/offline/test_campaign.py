@@ -249,13 +249,18 @@ def test_that_the_companion_only_learns_obstacles_over_mavlink(tmp_path):
 
 def test_that_the_cli_reruns_one_episode_and_writes_json(tmp_path, capsys):
     out = tmp_path / "c.json"
+    saved = tmp_path / "ep3.toml"
     code = main(["campaign", "--family", "corridor", "--episode", "3", "--methods", "deterministic", "--seed", "9",
-                 "--workers", "1", "--duration", "6", "--json", str(out)])
+                 "--workers", "1", "--duration", "6", "--json", str(out), "--save-scenario", str(saved)])
     assert code == 0
     text = capsys.readouterr().out
     assert "deterministic" in text and "wrote" in text
     doc = json.loads(out.read_text())
     assert doc["episodes"] == [3] and doc["results"][0]["episode"] == 3 and doc["family"] == "corridor"
+    assert tomllib.loads(saved.read_text()) == generate_scenario("corridor", 9, 3, duration_s=6.0)
+    assert not (tmp_path / "c.jsonl").exists()  # one re-run episode writes no results file unless asked
+    assert main(["campaign", "--save-scenario", str(saved)]) == 2
+    assert "--save-scenario needs --episode" in capsys.readouterr().err
 
 
 # --------------------------------------------------------------------------- the real thing

@@ -29,8 +29,8 @@ DEADLINE_S = 240.0  # for any one subprocess step below, on a loaded 2-core mach
 
 @pytest.fixture(scope="module")
 def uninterrupted():
-    """The reference: the same campaign flown in this process, in one go."""
-    res = run_campaign(FAMILY, range(EPISODES), METHODS, SEED, workers=1, duration_s=DURATION_S, progress=False)
+    """The reference: the same campaign flown in one go on the local process pool (two processes)."""
+    res = run_campaign(FAMILY, range(EPISODES), METHODS, SEED, workers=2, duration_s=DURATION_S, progress=False)
     assert all(r.score is not None for r in res.results)
     return {r.key: r.reproducible_json() for r in res.results}
 
