@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
+from companion.offline.campaign.reliability import PROMISE_EDGES, observed_over_promised, promise_bin
+from companion.offline.campaign.stats import reliability_bins
 from companion.offline.campaign import (
     FAMILIES,
     METHODS,
@@ -134,6 +136,19 @@ def test_that_clopper_pearson_matches_known_intervals():
         clopper_pearson(3, 2)
 
 
+def test_that_a_reliability_bin_exceeds_its_promise_only_when_its_interval_lies_above_it():
+    # 1 hit in 5 pairs promised 2e-5 each: observed 0.2, interval [0.005, 0.72] above 2e-5 -> exceeds;
+    # no hit in 10 promised 1e-7: interval [0, 0.31] -> kept; 1 hit in 3 pairs promised 0.4: kept
+    bins = reliability_bins([10, 0, 5, 0, 0, 0, 3], [0, 0, 1, 0, 0, 0, 1], [1e-6, 0, 1e-4, 0, 0, 0, 1.2])
+    assert [b.exceeds_promise for b in bins] == [False, False, True, False, False, False, False]
+    assert bins[2].promised_mean == pytest.approx(2e-5) and bins[2].observed == 0.2
+    assert bins[2].observed_ci95 == pytest.approx(clopper_pearson(1, 5))
+    assert bins[1].pairs == 0 and bins[1].promised_mean is None and bins[1].observed is None
+    assert (bins[0].lo, bins[0].hi, bins[-1].hi) == (0.0, 1e-6, 0.5)
+    assert observed_over_promised(2, 1e-4 + 1e-6 + 1.2) == pytest.approx(2 / 1.200101)
+    assert observed_over_promised(0, 0.0) is None
+
+
 def test_that_the_bound_is_phi_of_minus_the_touch_radius():
     # SPEC section 2: c = 0.90 in 3-D -> r = 2.5003, Y = 0.0124, bound Phi(-r) = Y / 2
     assert collision_bound(0.90) == pytest.approx(0.0124 / 2, rel=2e-3)
@@ -189,6 +204,13 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
     # (c = 0: the inflated ellipsoids overlap, Phi(0) = 1/2)
     expected = sum(float(norm.cdf(-touch_radius(c, 3))) for c in (0.99, 0.2, 0.95, 0.95)) + 0.5
     assert s.predicted_collisions_bound == pytest.approx(expected)
+    # the same five promises, binned by decade of Phi(-r(c)), with the one hit (a at 0.3 s, c = 0.2)
+    promises = [float(norm.cdf(-touch_radius(c, 3))) for c in (0.99, 0.2, 0.95, 0.95)] + [0.5]
+    assert sum(s.promise_pairs) == 5 and sum(s.promise_hits) == 1
+    assert s.promise_hits[promise_bin(promises[1])] == 1
+    assert sum(s.promise_sum) == pytest.approx(expected)
+    for p in promises:
+        assert PROMISE_EDGES[promise_bin(p)] <= p <= PROMISE_EDGES[promise_bin(p) + 1]
     # NEES e' (S_d + S_o)^-1 e of the relative position: errors 0, 0.05, 0, 0, 0.15 m over 0.02 m^2
     assert s.relative_nees == pytest.approx([0.0, 0.05**2 / 0.02, 0.0, 0.0, 0.15**2 / 0.02])
     assert s.drone_nees == [0.0, 0.0, 0.0]
@@ -222,7 +244,7 @@ def test_that_a_tiny_campaign_runs_and_reports_every_method(tiny_campaign, tmp_p
     doc = json.loads(json.dumps(res.to_json(), allow_nan=False))  # strict JSON: no inf/NaN
     assert doc["summary"]["hyperplane"]["episodes"] == 2 and len(doc["results"]) == 4
     written = res.plot(tmp_path / "fig")
-    assert [p.name for p in written] == ["collision_rate.png", "min_contour_ecdf.png"]
+    assert [p.name for p in written] == ["collision_rate.png", "min_contour_ecdf.png", "reliability.png"]
     assert all(p.stat().st_size > 1000 for p in written)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import io
 
 import pytest
@@ -13,14 +14,8 @@ from companion.offline.campaign.progress import Progress
 def _result(collided: bool | None) -> EpisodeResult:
     score = None
     if collided is not None:
-        score = EpisodeScore(
-            n_obstacles=1, collided=collided, obstacle_collision=collided, collisions=int(collided),
-            min_true_clearance_m=0.1, goal_reached=True, time_to_goal_s=9.0, steps=10, pair_steps_in_range=5,
-            pair_step_collisions=0, pair_time_in_range_s=1.5, contact_time_s=0.0, contour_pairs=5,
-            contour_pairs_below_c_min=0, steps_below_c_min=0, min_realised_contour=0.95, active_pairs=1,
-            active_pair_collisions=0, predicted_collisions_bound=0.01, drone_nees=[1.0], relative_nees=[2.0],
-            model_step_error_m=[0.01], replans=10, failed_plans=0, slack_plans=0, slack_max=0.0,
-            solve_times_s=[0.01], sim_time_s=12.0, commands_sha256="0" * 64)
+        neutral = {f.name: 0 for f in dataclasses.fields(EpisodeScore)}
+        score = EpisodeScore(**{**neutral, "collided": collided, "truth": {}})
     return EpisodeResult(episode=0, method="paper", family="antipodal", seed=1, sim_seed=2, score=score,
                          error=None if score else "RuntimeError: x")
 

@@ -20,6 +20,7 @@ from scipy.stats import chi2, norm
 
 from companion.loop.config import LoopConfig
 from companion.offline.campaign.jsonable import to_jsonable
+from companion.offline.campaign.reliability import PROMISE_EDGES, promise_bin
 from companion.offline.slack import slack_report
 
 logger = logging.getLogger(__name__)
@@ -66,6 +67,9 @@ class EpisodeScore:
     slack_max: float
     slack_violation_contour: float       #: deepest c_min - realised contour at a slack replan (companion.offline.slack)
     slack_violation_m: float             #: ... and the largest missing separation, metres
+    promise_pairs: list[int]             #: tracked in-range pairs per bin of promised p (reliability.PROMISE_EDGES)
+    promise_hits: list[int]              #: ... of which the bodies truly overlapped
+    promise_sum: list[float]             #: ... and the sum of their promised p
     solve_times_s: list[float]
     sim_time_s: float
     commands_sha256: str
@@ -118,6 +122,8 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
     drone_nees: list[float] = []
     rel_nees: list[float] = []
     model_err: list[float] = []
+    n_bins = len(PROMISE_EDGES) - 1
+    promise_pairs, promise_hits, promise_sum = [0] * n_bins, [0] * n_bins, [0.0] * n_bins
     prev = None  # (t, true drone position, planned displacement over the first step)
     last_t = -math.inf
     for rec, (_, p_true, obs_true) in zip(records, replan_truth):
@@ -146,7 +152,8 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
             contour_pairs += 1
             min_contour = min(min_contour, ct)
             # Phi(-r) with r = sqrt(chi2_3.ppf(c)): 1/2 for c = 0 (ellipsoids overlap), 0 for c = 1
-            bound_sum += float(norm.cdf(-math.sqrt(chi2.ppf(min(max(ct, 0.0), 1.0), 3))))
+            promise = float(norm.cdf(-math.sqrt(chi2.ppf(min(max(ct, 0.0), 1.0), 3))))
+            bound_sum += promise
             if ct < c_min:
                 contour_below += 1
                 below_here = True
@@ -155,6 +162,10 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
                 rel_true = obs_true[names[j]] - p_true
                 err = rel_est - rel_true
                 rel_nees.append(float(err @ np.linalg.solve(rec.drone_cov + rec.obstacle_covs[key], err)))
+                b = promise_bin(promise)
+                promise_pairs[b] += 1
+                promise_hits[b] += int(np.linalg.norm(rel_true) < radius_sum[j])
+                promise_sum[b] += promise
                 if ct < ACTIVE_CONTOUR:
                     active_pairs += 1
                     active_hits += int(np.linalg.norm(rel_true) < radius_sum[j])
@@ -196,6 +207,9 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
         slack_max=max((r.slack_max for r in records if r.status != "failed"), default=0.0),  # failed: inf
         slack_violation_contour=slack.largest_violation_contour,
         slack_violation_m=slack.largest_violation_m,
+        promise_pairs=promise_pairs,
+        promise_hits=promise_hits,
+        promise_sum=promise_sum,
         solve_times_s=[float(r.solve_time_s) for r in records],
         sim_time_s=float(run.sim_time_s),
         commands_sha256=hashlib.sha256(np.ascontiguousarray(commands).tobytes()).hexdigest(),

@@ -12,6 +12,7 @@ from scipy.stats import beta, norm
 from companion.core.overlap import touch_radius
 from companion.errors import InputError
 from companion.offline.campaign.jsonable import to_jsonable
+from companion.offline.campaign.reliability import PROMISE_EDGES, ReliabilityBin, observed_over_promised
 
 logger = logging.getLogger(__name__)
 
@@ -38,6 +39,17 @@ def clopper_pearson(k: int, n: int, confidence: float = 0.95) -> tuple[float, fl
 def collision_bound(c_min: float, dim: int = 3) -> float:
     """Per-step, per-obstacle collision bound ``Phi(-r_min)``, ``r_min = sqrt(chi2_dim.ppf(c_min))``."""
     return float(norm.cdf(-float(touch_radius(c_min, dim))))
+
+
+def reliability_bins(pairs: Sequence[int], hits: Sequence[int], promised_sum: Sequence[float]) -> tuple[ReliabilityBin, ...]:
+    """Bins from pooled per-bin counts (pairs, hits) and sums of promised probabilities."""
+    out = []
+    for b, (n, k, s) in enumerate(zip(pairs, hits, promised_sum)):
+        ci = clopper_pearson(int(k), int(n))
+        mean = s / n if n else None
+        out.append(ReliabilityBin(PROMISE_EDGES[b], PROMISE_EDGES[b + 1], int(n), int(k), mean,
+                                  k / n if n else None, ci, bool(n and ci[0] > mean)))
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -86,6 +98,8 @@ class MethodSummary:
     slack_max: float
     slack_violation_contour_max: float  #: deepest c_min - realised contour at a slack replan, any episode
     slack_violation_m_max: float  #: largest missing separation at a slack replan, metres
+    reliability: tuple[ReliabilityBin, ...]  #: promised against observed, per bin of promised p
+    observed_over_promised: float | None  #: hits over the sum of promised p (tracked in-range pairs)
     solve_time_median_ms: float | None
     solve_time_p99_ms: float | None
     min_realised_contour: list[float | None]  #: one per episode (None: nothing came within range)
@@ -117,6 +131,10 @@ def summarise(results: Sequence[Any], methods: Sequence[str], c_min: float) -> d
         active_hits = sum(r.active_pair_collisions for r in rows)
         ttg = [r.time_to_goal_s for r in rows if r.goal_reached and r.time_to_goal_s is not None]
         replans = sum(r.replans for r in rows)
+        n_bins = len(PROMISE_EDGES) - 1
+        bin_pairs = np.sum([r.promise_pairs for r in rows], axis=0) if rows else np.zeros(n_bins, int)
+        bin_hits = np.sum([r.promise_hits for r in rows], axis=0) if rows else np.zeros(n_bins, int)
+        bin_sum = np.sum([r.promise_sum for r in rows], axis=0) if rows else np.zeros(n_bins)
         out[m] = MethodSummary(
             episodes=n,
             errors=errors,
@@ -160,6 +178,8 @@ def summarise(results: Sequence[Any], methods: Sequence[str], c_min: float) -> d
             slack_max=max((r.slack_max for r in rows), default=0.0),
             slack_violation_contour_max=max((r.slack_violation_contour for r in rows), default=0.0),
             slack_violation_m_max=max((r.slack_violation_m for r in rows), default=0.0),
+            reliability=reliability_bins(bin_pairs, bin_hits, bin_sum),
+            observed_over_promised=observed_over_promised(int(bin_hits.sum()), float(bin_sum.sum())),
             solve_time_median_ms=float(np.median(solve) * 1e3) if solve.size else None,
             solve_time_p99_ms=float(np.percentile(solve, 99) * 1e3) if solve.size else None,
             min_realised_contour=[r.min_realised_contour for r in rows],

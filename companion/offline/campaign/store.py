@@ -8,7 +8,7 @@ Methods and episode indices may differ between sessions: a campaign can be exten
 
 Format (one JSON object per line)::
 
-    {"format": "ogccmpc-campaign-results", "version": 2, "family": ..., "seed": ..., "c_min": ..., "duration_s": ...}
+    {"format": "ogccmpc-campaign-results", "version": 3, "family": ..., "seed": ..., "c_min": ..., "duration_s": ...}
     {"episode": 0, "method": "hyperplane", ..., "wall_time_s": 4.2}
     ...
 """
@@ -27,7 +27,7 @@ from companion.offline.campaign.results import EpisodeResult
 logger = logging.getLogger(__name__)
 
 FORMAT = "ogccmpc-campaign-results"
-VERSION = 2  # 2: slack violation fields in the rows
+VERSION = 3  # 2: slack violation fields in the rows; 3: promise bins
 #: A row longer than this is not one the campaign wrote (bounded reads of a file given on the command line).
 MAX_LINE_BYTES = 16 * 1024 * 1024
 

@@ -58,6 +58,11 @@ def format_table(result: CampaignResult) -> str:
                  f"pairs whose realised contour of touch fell below c_min; failed: share of replans; slack: episodes "
                  f"with slack; {result.wall_time_s:.0f} s on {result.workers} worker(s))")
     for m, s in result.summary.items():
+        used = [b for b in s.reliability if b.pairs]
+        over = [f"[{b.lo:.0e}, {b.hi:.0e})" for b in used if b.exceeds_promise]
+        lines.append(f"{m}: promise against truth over {sum(b.pairs for b in used)} tracked pairs: observed/promised = "
+                     f"{_fmt(s.observed_over_promised, '.3g')}; bins above their promise: {', '.join(over) or 'none'}")
+    for m, s in result.summary.items():
         if s.slack_plans:
             lines.append(f"{m}: {s.slack_plans} slack replan(s) in {s.episodes_with_slack} episode(s), accepted and flagged; "
                          f"deepest inside c_min: {s.slack_violation_contour_max:.3f} in contour, "
