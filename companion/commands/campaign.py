@@ -18,7 +18,7 @@ import json
 import logging
 from pathlib import Path
 
-from companion.commands._argtypes import integer_at_least, open_unit_interval, positive_seconds
+from companion.commands._argtypes import integer_at_least, non_negative_seconds, open_unit_interval, positive_seconds
 from companion.errors import ConfigError
 from companion.offline.campaign import (
     DEFAULT_DURATION_S,
@@ -65,6 +65,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --episode: also write the episode's scenario as a TOML file (fly it with companion demo)")
     p.add_argument("--c-min", type=open_unit_interval, default=0.90, help="contour of touch that may not be crossed")
     p.add_argument("--duration", type=positive_seconds, default=DEFAULT_DURATION_S, help="simulated seconds per episode")
+    p.add_argument("--drone-noise-correlation", type=non_negative_seconds, default=0.0, metavar="SECONDS",
+                   help="correlation time of the simulated drone position error (Gauss-Markov, as an EKF's error "
+                        "wanders; same covariance, reported honestly); 0: white")
     p.add_argument("--results", metavar="FILE", default=None,
                    help="results file (JSON lines, one finished run per line, appended as runs finish; "
                         "default: beside --json with the suffix .jsonl, else campaign-FAMILY-seedS.jsonl; "
@@ -102,12 +105,14 @@ def run(args: argparse.Namespace) -> int:
     episodes = [args.episode] if args.episode is not None else range(args.episodes)
     if args.save_scenario:
         path = write_scenario(generate_scenario(args.family, args.seed, args.episode, c_min=args.c_min,
-                                                duration_s=args.duration), args.save_scenario)
+                                                duration_s=args.duration,
+                                                drone_noise_correlation_s=args.drone_noise_correlation),
+                              args.save_scenario)
         print(f"wrote {path}")
     store = results_path(args)
     result = run_campaign(args.family, episodes, args.methods, args.seed, workers=args.workers, c_min=args.c_min,
                           duration_s=args.duration, progress=args.progress, results_path=store, resume=args.resume,
-                          scheduler=args.scheduler)
+                          scheduler=args.scheduler, drone_noise_correlation_s=args.drone_noise_correlation)
     print(format_table(result))
     if store is not None:
         print(f"results: {store}")

@@ -38,6 +38,7 @@ from companion.core.overlap import touch_radius
 from companion.loop.config import load_scenario as companion_load
 from mavsim.lockstep import LockstepSimulator
 from mavsim.scenario import load_scenario as mavsim_load
+from mavsim.scenario import scenario_from_dict as mavsim_load_dict
 
 SHORT_S = 12.0  # simulated seconds per run in the default suite: takeoff and the first encounter
 
@@ -98,6 +99,16 @@ def test_that_an_episode_is_drawn_from_its_seed_and_index_alone():
     assert generate_scenario("crossing", 5, 3) != generate_scenario("crossing", 5, 4)
     assert generate_scenario("crossing", 5, 3) != generate_scenario("crossing", 6, 3)
     assert episode_sim_seed(5, 3) == episode_sim_seed(5, 3) != episode_sim_seed(5, 4)
+
+
+def test_that_a_correlated_drone_error_is_opt_in_and_leaves_the_rest_of_the_episode_alone():
+    white = generate_scenario("crossing", 5, 3)
+    assert "position_noise_correlation_s" not in white["sim"]  # the default episode is the one of before
+    wandering = generate_scenario("crossing", 5, 3, drone_noise_correlation_s=2.0)
+    assert wandering["sim"].pop("position_noise_correlation_s") == 2.0 and wandering == white
+    assert mavsim_load_dict(generate_scenario("crossing", 5, 3, drone_noise_correlation_s=2.0)).sim.position_noise_correlation_s == 2.0
+    with pytest.raises(SystemExit):
+        main(["campaign", "--drone-noise-correlation", "-1"])
 
 
 def test_that_unknown_family_and_method_are_rejected():

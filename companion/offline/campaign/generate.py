@@ -108,11 +108,14 @@ def _place(rng: np.random.Generator, draw: Callable[[], tuple[np.ndarray, np.nda
 
 
 def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90,
-                      duration_s: float = DEFAULT_DURATION_S) -> dict:
+                      duration_s: float = DEFAULT_DURATION_S, drone_noise_correlation_s: float = 0.0) -> dict:
     """Draw episode ``index`` of a ``family`` campaign with ``seed`` as a scenario dict (TOML tables).
 
     The same ``(family, seed, index)`` always gives the same dict. The planner's
     ``formulation`` is left at ``hyperplane``; the campaign overrides it per method.
+    ``drone_noise_correlation_s`` > 0 makes mavsim's drone position error a Gauss-Markov
+    process with that correlation time (``mavsim.noise``; same covariance, reported as
+    before); 0 keeps it white and the dict as it always was.
     """
     if family not in FAMILIES:
         raise InputError(f"unknown campaign family {family!r} (known: {', '.join(FAMILIES)})")
@@ -235,6 +238,8 @@ def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90
         },
         "world": {"obstacles": obstacles},
     }
+    if drone_noise_correlation_s > 0.0:
+        data["sim"]["position_noise_correlation_s"] = float(drone_noise_correlation_s)
     if walls:
         data["map"] = {"walls": walls}
     return data

@@ -32,10 +32,12 @@ VERSION = 3  # 2: slack violation fields in the rows; 3: promise bins
 MAX_LINE_BYTES = 16 * 1024 * 1024
 
 
-def campaign_header(family: str, seed: int, c_min: float, duration_s: float) -> dict[str, Any]:
+def campaign_header(family: str, seed: int, c_min: float, duration_s: float,
+                    drone_noise_correlation_s: float = 0.0) -> dict[str, Any]:
     """The header line: what every row of the file depends on."""
     return {"format": FORMAT, "version": VERSION, "family": family, "seed": int(seed),
-            "c_min": float(c_min), "duration_s": float(duration_s)}
+            "c_min": float(c_min), "duration_s": float(duration_s),
+            "drone_noise_correlation_s": float(drone_noise_correlation_s)}
 
 
 class ResultsFile:
