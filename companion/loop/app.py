@@ -299,7 +299,7 @@ class Companion:
         the corridor runs weave: 0.6-0.75 m from the walls against 0.98 m (6 seeds).
         Without a current plan (braking, or before the first) the estimate is used.
         """
-        if self.cfg.velocity_time_constant_s <= 0.0:
+        if self.planner.lag.instantaneous:
             return self._command.copy()
         if self._plan is None:
             return np.asarray(est.velocity, dtype=float).copy()

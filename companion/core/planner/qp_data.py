@@ -68,8 +68,8 @@ class RequestData:
         # bounds that do not depend on the iterate
         self.l = np.zeros(layout.m)
         self.u = np.zeros(layout.m)
-        dyn = np.zeros((N, 3))
-        dyn[0] = request.position + layout.lag.c * self.v0     # p_1 - b V_1 = p_0 + c V_0
+        dyn = layout.lag.free_increments(self.v0, N)           # p_1 - b V_1 = p_0 + c V_0 for the lag
+        dyn[0] += request.position
         self.l[layout.row["dyn"].slice] = self.u[layout.row["dyn"].slice] = dyn.ravel()
         acc = np.broadcast_to(amax * tau, (N, 3)).copy()
         lo_acc, hi_acc = -acc, acc.copy()
