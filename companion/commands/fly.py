@@ -37,7 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--tlog", default=None, help="record the link to this tlog")
     p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S wall seconds")
-    p.add_argument("--exit-after-goal", type=float, default=None, metavar="S", help="stop S seconds after the goal is reached")
+    p.add_argument("--exit-after-goal", type=float, default=None, metavar="S",
+                   help="S seconds after the goal is reached, switch the vehicle to Hold (AUTO.LOITER) and stop "
+                        "once the HEARTBEAT shows it holding")
     p.add_argument("--json", action="store_true", help="print the run report as JSON")
     p.set_defaults(func=run)
 
@@ -59,10 +61,13 @@ def run(args: argparse.Namespace) -> int:
     companion = Companion(scenario, offboard=offboard)
 
     def stop(c: Companion) -> bool:
+        """After --exit-after-goal, hand the vehicle back (Hold) and stop once it holds."""
         t_goal = c.state.goal_reached_t_s
         if args.exit_after_goal is not None and t_goal is not None and c.records:
-            return c.records[-1].t_link_s - t_goal >= args.exit_after_goal
-        return c.sequencer.phase.name == "GAVE_UP"
+            t_now = c.records[-1].t_link_s
+            if t_now - t_goal >= args.exit_after_goal:
+                c.sequencer.hand_back(t_now, "goal reached")
+        return c.sequencer.phase.name in ("HELD", "GAVE_UP")
 
     link = open_link(args.connect, tlog=args.tlog, clock=microsecond_clock)
     started = microsecond_clock()

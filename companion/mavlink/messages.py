@@ -492,6 +492,11 @@ def command_long(
     )
 
 
+def request_message_command(message_id: int, **target) -> mavlink2.MAVLink_command_long_message:
+    """MAV_CMD_REQUEST_MESSAGE (512): param1 = the id of the message wanted (e.g. HOME_POSITION 242)."""
+    return command_long(mavlink2.MAV_CMD_REQUEST_MESSAGE, (float(int(message_id)),), **target)
+
+
 def set_mode_command(custom_mode: int, armed: bool, **target) -> mavlink2.MAVLink_command_long_message:
     """MAV_CMD_DO_SET_MODE (176) for a packed PX4 ``custom_mode``.
 
