@@ -56,17 +56,13 @@ def run(args: argparse.Namespace) -> int:
         overrides["c_max"] = None
     scenario = load_scenario(args.scenario, **overrides)
     offboard = scenario.loop.offboard_config(
-        arm=args.arm, takeoff_alt_m=args.takeoff_alt, reengage=args.reengage or scenario.loop.reengage
+        arm=args.arm, takeoff_alt_m=args.takeoff_alt, reengage=args.reengage or scenario.loop.reengage,
+        hold_after_goal_s=args.exit_after_goal,
     )
     companion = Companion(scenario, offboard=offboard)
 
     def stop(c: Companion) -> bool:
-        """After --exit-after-goal, hand the vehicle back (Hold) and stop once it holds."""
-        t_goal = c.state.goal_reached_t_s
-        if args.exit_after_goal is not None and t_goal is not None and c.records:
-            t_now = c.records[-1].t_link_s
-            if t_now - t_goal >= args.exit_after_goal:
-                c.sequencer.hand_back(t_now, "goal reached")
+        """Once the vehicle holds after --exit-after-goal (the sequencer hands it back), or on giving up."""
         return c.sequencer.phase.name in ("HELD", "GAVE_UP")
 
     link = open_link(args.connect, tlog=args.tlog, clock=microsecond_clock)
@@ -80,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
     report = companion_report(companion)
     for key in ("events", "failsafe_events"):  # seconds since the start of this run, not epoch
         report[key] = [(round(t - started, 2), text) for t, text in report[key]]
+    if report.get("goal_reached_companion_t_s") is not None:
+        report["goal_reached_companion_t_s"] = round(report["goal_reached_companion_t_s"] - started, 2)
     if stats is not None:
         report["ticks"], report["late_ticks"] = stats.ticks, stats.late_ticks
     if args.json:

@@ -320,6 +320,7 @@ class Companion:
             drone_covs = np.broadcast_to(cov_now, (n, 3, 3)).copy()
         if np.linalg.norm(position - self.scenario.mission.goal) <= self.scenario.mission.goal_tolerance_m and self.state.goal_reached_t_s is None:
             self.state.goal_reached_t_s = t_s
+            self.sequencer.on_goal_reached(t_s)
             out.append(self._say(t_s, SEV_INFO, "companion: goal reached"))
 
         self.tracker.prune(t_v)

@@ -112,6 +112,9 @@ class OffboardConfig:
         takeoff request to AUTO.LOITER.
     reengage : bool
         Request OFFBOARD again after the vehicle left it while engaged.
+    hold_after_goal_s : float or None
+        Seconds after :meth:`OffboardSequencer.on_goal_reached` to hand the
+        vehicle back (Hold, see :meth:`OffboardSequencer.hand_back`); None never.
     heartbeat_timeout_s : float
         Autopilot heartbeat silence that counts as a lost link (MAVSDK: 3 s).
     """
@@ -124,6 +127,7 @@ class OffboardConfig:
     takeoff_timeout_s: float = 30.0
     reengage: bool = False
     heartbeat_timeout_s: float = 3.0
+    hold_after_goal_s: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("prestream_s", "retry_period_s", "takeoff_timeout_s", "heartbeat_timeout_s"):
@@ -134,6 +138,10 @@ class OffboardConfig:
             raise ConfigError("offboard config: retry_period_s and heartbeat_timeout_s must be > 0")
         if not (isinstance(self.max_retries, int) and self.max_retries >= 0):
             raise ConfigError(f"offboard config: max_retries must be an integer >= 0, got {self.max_retries!r}")
+        if self.hold_after_goal_s is not None and not (math.isfinite(self.hold_after_goal_s)
+                                                        and self.hold_after_goal_s >= 0.0):
+            raise ConfigError(f"offboard config: hold_after_goal_s must be finite seconds >= 0, got "
+                              f"{self.hold_after_goal_s!r}")
         if self.takeoff_alt_m is not None and not (math.isfinite(self.takeoff_alt_m) and self.takeoff_alt_m > 0):
             raise ConfigError(f"offboard config: takeoff_alt_m must be > 0 metres, got {self.takeoff_alt_m!r}")
 
@@ -213,6 +221,7 @@ class OffboardSequencer:
         self._seen_takeoff_mode = False
         self._home_alt_amsl_m: float | None = None
         self._home_requested_s: float | None = None
+        self._goal_s: float | None = None
         self._actions: list[Action] = []
         self.events: list[Event] = []
 
@@ -301,11 +310,19 @@ class OffboardSequencer:
                 self._transition(t_s, Phase.LINK_LOST,
                                  f"no autopilot HEARTBEAT for {t_s - self._hb_t:.1f} s; stopped commanding",
                                  mavlink2.MAV_SEVERITY_WARNING)
+        hold_after = self.config.hold_after_goal_s
+        if hold_after is not None and self._goal_s is not None and t_s - self._goal_s >= hold_after - 1e-9:
+            self.hand_back(t_s, "goal reached")
         self._advance(t_s)
         self._request_home(t_s)
         self._retry(t_s)
         actions, self._actions = self._actions, []
         return actions
+
+    def on_goal_reached(self, t_s: float) -> None:
+        """The mission's goal was reached at ``t_s``: hand back after ``hold_after_goal_s``, if set."""
+        if self._goal_s is None:
+            self._goal_s = t_s
 
     def hand_back(self, t_s: float, reason: str = "mission complete") -> None:
         """Ask for Hold (AUTO.LOITER) and keep streaming until the HEARTBEAT shows the vehicle out of OFFBOARD.

@@ -200,6 +200,9 @@ class AssumeEngaged:
     def on_home_altitude(self, alt_amsl_m: float) -> None:
         """Ignored."""
 
+    def on_goal_reached(self, t_s: float) -> None:
+        """Ignored."""
+
     def step(self, t_s: float) -> list:
         return []
 
