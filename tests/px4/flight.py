@@ -99,7 +99,10 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
     # the end: PX4 holds, no failsafe
     end_modes = [(main, sub, armed) for t, main, sub, armed in obs.modes if t >= t_exit]
     result["modes_after_exit"] = sorted({f"{m}.{s}{'' if a else ' disarmed'}" for m, s, a in end_modes})
-    result["failsafe_texts"] = [text for _, text in obs.texts if "ailsafe" in text]
+    result["failsafe_texts"] = [(round(t - obs.offboard_t, 2), text.strip()) for t, text in obs.texts
+                                if "ailsafe" in text]
+    result["px4_texts"] = [(round(t - obs.offboard_t, 2), text.strip()) for t, text in obs.texts]
+    result["companion_exit_after_offboard_s"] = round(t_exit - obs.offboard_t, 2)
     result["holds_after_exit"] = bool(end_modes) and all((m, s) == (AUTO, LOITER) and a for m, s, a in end_modes)
     # replay the recorded tlog
     rep = subprocess.run(_companion("replay", str(tlog), "--scenario", str(scenario), "--arm", "--takeoff-alt",
