@@ -250,7 +250,7 @@ def fit_axis(data, dt: float = GRID_S, *, first_order: bool = False, horizon_s: 
         sol = least_squares(residual, start, bounds=(lo, hi), x_scale="jac", max_nfev=100)
         if best is None or sol.cost < best.cost:
             best = sol
-    return model(best.x)
+    return model(best.x).canonical()
 
 
 @dataclass(frozen=True)

@@ -164,3 +164,13 @@ def test_that_a_bad_vehicle_response_table_names_the_key():
     with pytest.raises(ConfigError, match=r"vehicle_response.vertical.drag_per_s = -1"):
         PlannerConfig(vehicle_response={"horizontal": {"p_gain_per_s": 1.0},
                                         "vertical": {"p_gain_per_s": 2.0, "drag_per_s": -1}})
+
+
+def test_that_the_canonical_response_swaps_drag_and_acceleration_lag_without_changing_the_response():
+    slow_lag = AxisResponse(14.06, 2.9645, 6.737, 1.2538)      # what a fit may return
+    canon = slow_lag.canonical()
+    assert 1.0 / canon.accel_lag_s > canon.drag_per_s
+    assert canon.canonical() == canon
+    u = np.sin(np.linspace(0.0, 6.0, 40))[:, None] * np.ones(3)
+    a, b = ResponseModel(0.3, slow_lag, slow_lag), ResponseModel(0.3, canon, canon)
+    np.testing.assert_allclose(a.simulate(np.zeros(3), u)[1], b.simulate(np.zeros(3), u)[1], atol=1e-9)

@@ -26,6 +26,8 @@ def sitl_dir() -> Path | None:
     """The PX4 SITL build directory (with ``start-sih``), or None when there is none."""
     env = os.environ.get("PX4_SITL_DIR")
     path = Path(env) if env else REPO.parent / "shared" / "px4-sitl"
+    if not path.is_absolute():
+        path = REPO / path
     return path if (path / "start-sih").is_file() else None
 
 

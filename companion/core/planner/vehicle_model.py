@@ -155,6 +155,20 @@ class AxisResponse:
         except ConfigError as exc:
             raise ConfigError(f"{where}.{exc}") from None
 
+    def canonical(self) -> AxisResponse:
+        """The same input-output response with the acceleration lag as the faster of its two poles.
+
+        The velocity's transfer function ``(K_p s + K_i) / (T_a s^3 + (1 + T_a k) s^2 + (k + K_p) s + K_i)``
+        is unchanged when ``1/T_a`` and ``k`` swap (with ``K_p``, ``K_i`` scaled by the ratio of
+        the lags): a fit cannot tell them apart, physics can (the attitude settles faster than drag).
+        """
+        ta, k = self.accel_lag_s, self.drag_per_s
+        if ta <= 0.0 or k <= 0.0 or 1.0 / ta >= k:
+            return self
+        ta_new = 1.0 / k
+        scale = ta_new / ta
+        return AxisResponse(self.p_gain_per_s * scale, self.i_gain_per_s2 * scale, 1.0 / ta, ta_new)
+
     def as_dict(self) -> dict[str, float]:
         return {name: getattr(self, name) for name in self.FIELDS}
 
