@@ -75,6 +75,8 @@ class RequestData:
         lo_acc, hi_acc = -acc, acc.copy()
         lo_acc[0] += self.v0
         hi_acc[0] += self.v0
+        if not layout.lag.bounds_command_steps:       # a response model: the autopilot limits acceleration
+            lo_acc[:], hi_acc[:] = -np.inf, np.inf
         self.l[layout.row["accel"].slice], self.u[layout.row["accel"].slice] = lo_acc.ravel(), hi_acc.ravel()
         if layout.row["cmd"].size:          # commands within the speed bound: (1 - a) |u_i| <= (1 - a) v_max
             alpha = layout.lag.alpha
