@@ -27,10 +27,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.linalg import expm
 from scipy.optimize import least_squares
 
-from companion.core.planner.vehicle_model import AxisResponse
+from companion.core.planner.vehicle_model import AxisResponse, discretise
 from companion.errors import CompanionError
 from companion.mavlink import messages, px4
 from companion.mavlink.tlog import read_tlog
@@ -170,12 +169,7 @@ def load_response_log(path: str | Path, grid_s: float = GRID_S) -> ResponseLog:
 
 
 def _discrete(axis: AxisResponse, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    a, b = axis.matrices()
-    n = a.shape[0]
-    m = np.zeros((n + 1, n + 1))
-    m[:n, :n], m[:n, n] = a * dt, b * dt
-    e = expm(m)
-    return e[:n, :n], e[:n, n]
+    return discretise(*axis.matrices(), dt)
 
 
 def _states(axis: AxisResponse, dt: float, cmd: np.ndarray, v0: float) -> np.ndarray:

@@ -1,4 +1,17 @@
-"""The planner's vehicle model: velocity commands held for ``tau``, followed with a first-order lag.
+"""The planner's vehicle models: velocity commands held for ``tau`` and the vehicle's response to them.
+
+Two models, both keeping the QP linear with a fixed sparsity pattern (:mod:`qp_layout`'s
+``dyn`` rows ``p_i - p_{i-1} - sum_k h_k V_{i-k} = f_i v_0``):
+
+- :class:`LagModel`, a first-order lag ``T`` (below; ``T = 0`` is the paper's model);
+  the variables ``V`` are the vehicle's velocities and the commands are derived.
+- :class:`ResponseModel`, per axis an :class:`AxisResponse` (a PI velocity loop with an
+  acceleration lag against linear drag: PX4's two-part response, identified from a log
+  by ``companion identify``); the variables ``V`` are the commands, the positions the
+  discretised response to them (``N (N + 1) / 2`` nonzeros per axis). The lag is its
+  special case ``K_p = 1/T``.
+
+The lag in detail:
 
 The autopilot does not jump to a commanded velocity: PX4's velocity controller (and
 mavsim's model of it) approaches the setpoint with roughly a first-order lag of time
@@ -198,7 +211,7 @@ class AxisResponse:
         return np.asarray(x, dtype=float)
 
 
-def _discretise(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+def discretise(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Zero-order-hold ``(Ad, Bd)`` of ``x' = A x + B u`` over ``dt`` seconds."""
     n = a.shape[0]
     m = np.zeros((n + 1, n + 1))
@@ -239,7 +252,7 @@ class ResponseModel:
         self.horizontal, self.vertical = horizontal, vertical
         self.axes = (horizontal, horizontal, vertical)
         self._continuous = [ax.matrices() for ax in self.axes]
-        self._discrete = [_discretise(a, b, self.step_s) for a, b in self._continuous]
+        self._discrete = [discretise(a, b, self.step_s) for a, b in self._continuous]
 
     def _state0(self, v0: np.ndarray) -> list[np.ndarray]:
         return [ax.steady_state(float(v)) for ax, v in zip(self.axes, np.asarray(v0, dtype=float))]
@@ -298,7 +311,7 @@ class ResponseModel:
                 x = ad @ x + bd * u
             rest = remaining - full * self.step_s
             if rest > 0.0:
-                ad_r, bd_r = _discretise(a, b, rest)
+                ad_r, bd_r = discretise(a, b, rest)
                 x = ad_r @ x + bd_r * commands[full, axis]
             out[axis] = x[1]
         return out
