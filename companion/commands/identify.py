@@ -15,7 +15,7 @@ import logging
 import sys
 from pathlib import Path
 
-from companion.offline.identify import identify, load_response_log
+from companion.offline.identify import GRID_S, identify, load_response_log
 
 logger = logging.getLogger(__name__)
 
@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from companion.plots.identify_figure import plot_identification
 
-        summary["figure"] = str(plot_identification(log, result, args.plot, reference_lag_s=args.reference_lag))
+        summary["figure"] = str(plot_identification(log, result, args.plot, reference_lag_s=args.reference_lag, dt=GRID_S))
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

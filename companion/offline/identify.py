@@ -289,4 +289,4 @@ def identify(log: ResponseLog, *, reference_lag_s: float = 0.3, horizon_s: float
 
 def modelled_velocity(axis: AxisResponse, cmd: np.ndarray, v0: float, dt: float = GRID_S) -> np.ndarray:
     """The open-loop velocity (M,) of ``axis`` under ``cmd`` (M,), for figures."""
-    return _states(axis, dt, cmd, v0)[:, 1]
+    return axis.velocities(cmd, v0, dt)

@@ -12,14 +12,16 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from companion.core.planner.vehicle_model import AxisResponse  # noqa: E402
-from companion.offline.identify import Identification, ResponseLog, modelled_velocity  # noqa: E402
 
 logger = logging.getLogger(__name__)
 
 
-def plot_identification(log: ResponseLog, result: Identification, out_dir: str | Path,
-                        reference_lag_s: float = 0.3) -> Path:
-    """Draw command, measured, modelled and reference-lag velocity per NED axis; return the PNG path."""
+def plot_identification(log, result, out_dir: str | Path, reference_lag_s: float = 0.3, dt: float = 0.05) -> Path:
+    """Draw command, measured, modelled and reference-lag velocity per NED axis; return the PNG path.
+
+    ``log`` has ``segments`` (t, command, velocity) on a ``dt`` grid and ``result`` the fitted
+    ``horizontal`` and ``vertical`` :class:`AxisResponse` (``companion.offline.identify``).
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     lag = AxisResponse(p_gain_per_s=1.0 / reference_lag_s)
@@ -30,9 +32,9 @@ def plot_identification(log: ResponseLog, result: Identification, out_dir: str |
             first = i == 0
             ax.step(t, cmd[:, k], where="post", color="0.6", lw=1, label="command" if first else None)
             ax.plot(t, vel[:, k], color="k", lw=1.2, label="measured" if first else None)
-            ax.plot(t, modelled_velocity(model, cmd[:, k], vel[0, k]), color="tab:blue", lw=1.2,
+            ax.plot(t, model.velocities(cmd[:, k], vel[0, k], dt), color="tab:blue", lw=1.2,
                     label="identified model" if first else None)
-            ax.plot(t, modelled_velocity(lag, cmd[:, k], vel[0, k]), color="tab:red", lw=1, ls="--",
+            ax.plot(t, lag.velocities(cmd[:, k], vel[0, k], dt), color="tab:red", lw=1, ls="--",
                     label=f"lag {reference_lag_s:g} s" if first else None)
         ax.set_ylabel(f"v {name} [m/s]")
         ax.grid(alpha=0.3)

@@ -185,6 +185,17 @@ class AxisResponse:
         scale = ta_new / ta
         return AxisResponse(self.p_gain_per_s * scale, self.i_gain_per_s2 * scale, 1.0 / ta, ta_new)
 
+    def velocities(self, commands: np.ndarray, v0: float, dt: float) -> np.ndarray:
+        """Velocity (M,) at the start of each of ``M`` steps of ``dt`` seconds under ``commands`` (M,), m/s,
+        from the steady state at ``v0``."""
+        ad, bd = discretise(*self.matrices(), dt)
+        x = self.steady_state(float(v0))
+        out = np.empty(len(commands))
+        for i, u in enumerate(np.asarray(commands, dtype=float)):
+            out[i] = x[1]
+            x = ad @ x + bd * u
+        return out
+
     def as_dict(self) -> dict[str, float]:
         return {name: getattr(self, name) for name in self.FIELDS}
 
