@@ -57,13 +57,13 @@ def run_realtime(
     start = clock()
     next_tick = start
     while True:
-        now = clock()
         for rx in link.poll():
             companion.handle(rx)
         for obstacle_link in obstacle_links:
             for rx in obstacle_link.poll():
                 companion.handle(rx)
         link.peer = companion.autopilot  # commands go to the autopilot's address only
+        now = clock()  # after the poll: every message handled before a tick is stamped no later than it
         if now >= next_tick:
             for msg in companion.tick(now):
                 link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times
