@@ -106,6 +106,8 @@ class LoopConfig:
         the filter's covariance while none is reported; ``"estimate"`` always uses the
         companion filter's covariance; ``"predicted"`` uses its open-loop prediction.
     drone_cov_floor_m2 : isotropic floor added to the drone's planning covariance.
+    max_plan_age_s : link seconds after its request past which a plan is no longer flown
+        (the stream brakes within the acceleration bound until a newer plan arrives).
 
     prestream_s, retry_period_s, max_retries, reengage : OFFBOARD engagement (see ``companion.mavlink.offboard``).
     """
@@ -115,6 +117,7 @@ class LoopConfig:
     obstacle_radius_m: float = 0.5
     drone_covariance: str = "reported"
     drone_cov_floor_m2: float = 0.0
+    max_plan_age_s: float = 1.0
     prestream_s: float = 1.0
     retry_period_s: float = 1.0
     max_retries: int = 5
@@ -128,6 +131,8 @@ class LoopConfig:
     def __post_init__(self) -> None:
         if not self.setpoint_rate_hz >= 10.0:
             raise ConfigError(f"[companion] setpoint_rate_hz must be >= 10 Hz (PX4 needs > 2 Hz), got {self.setpoint_rate_hz!r}")
+        if not (isinstance(self.max_plan_age_s, (int, float)) and math.isfinite(self.max_plan_age_s) and self.max_plan_age_s > 0.0):
+            raise ConfigError(f"[companion] max_plan_age_s must be finite seconds > 0, got {self.max_plan_age_s!r}")
         if self.drone_covariance not in ("reported", "estimate", "predicted"):
             raise ConfigError(f"[companion] drone_covariance must be 'reported', 'estimate' or 'predicted', got {self.drone_covariance!r}")
 

@@ -59,6 +59,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink import messages
 from companion.loop.app import Companion
+from companion.loop.records import status_counts
 from companion.errors import CompanionError
 from companion.mavlink.link import DEFAULT_SOURCE_COMPONENT, DEFAULT_SOURCE_SYSTEM, Received
 from companion.mavlink.offboard import OffboardConfig, Phase, SequencerState
@@ -176,7 +177,7 @@ class ReplayResult:
 
 
 class AssumeEngaged:
-    """Stand-in for :class:`~companion.mavlink.offboard.OffboardSequencer` in a what-if replay.
+    """The :class:`~companion.loop.engagement.OffboardSequence` of a what-if replay.
 
     Streams and counts as engaged from the first PX4 autopilot HEARTBEAT on; sends no
     commands. Used only for logs in which no companion ever asked for OFFBOARD.
@@ -358,9 +359,8 @@ def replay(
     if mode == "compare" and not lockstep:
         notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
 
-    companion = Companion(scenario, offboard=offboard)
+    companion = Companion(scenario, offboard=offboard, sequencer=AssumeEngaged() if assume_engaged else None)
     if assume_engaged:
-        companion.sequencer = AssumeEngaged()
         notes.append("offboard sequence assumed engaged from the first autopilot HEARTBEAT (what-if)")
 
     times, cmds, recs = [], [], []
@@ -398,9 +398,7 @@ def replay(
         max_diff, max_t = diffs[i_max]
     else:
         i_max, max_diff, max_t = None, None, None
-    statuses: dict[str, int] = {}
-    for r in companion.records:
-        statuses[r.status] = statuses.get(r.status, 0) + 1
+    statuses = status_counts(r.status for r in companion.records)
     result = ReplayResult(
         path=path,
         scenario_path=Path(scenario_path),

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from companion.loop.app import Companion
+from companion.loop.records import status_counts
 
 _FAILSAFE_WORDS = ("braking", "stale", "PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP", "slack used")
 
@@ -22,9 +23,7 @@ def companion_report(companion: Companion) -> dict:
     solve = np.array([r.solve_time_s for r in records]) if records else np.zeros(0)
     realised = [min(r.realised_contour.values()) for r in records if r.realised_contour]
     planned = [r.planned_min_contour for r in records if math.isfinite(r.planned_min_contour)]
-    statuses: dict[str, int] = {}
-    for r in records:
-        statuses[r.status] = statuses.get(r.status, 0) + 1
+    statuses = status_counts(r.status for r in records)
     state = companion.state
     return {
         "formulation": companion.cfg.formulation,
