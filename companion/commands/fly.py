@@ -5,16 +5,21 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 import time
 
+from companion.commands._argtypes import positive_seconds
+from companion.errors import CompanionError
 from companion.loop.app import Companion
-from companion.mavlink.link import DEFAULT_URL, open_link
-from companion.loop.realtime import run_realtime
-from companion.offline.report import companion_report, format_report
 from companion.loop.config import load_scenario
+from companion.loop.realtime import PlanWorker, run_realtime
+from companion.mavlink.link import DEFAULT_URL, open_link
+from companion.offline.report import companion_report, format_report
 
 logger = logging.getLogger(__name__)
+
+_PLANNER_START_S = 30.0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -36,10 +41,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--formulation", default=None, help="planner formulation (overrides the scenario)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--tlog", default=None, help="record the link to this tlog")
-    p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S wall seconds")
-    p.add_argument("--exit-after-goal", type=float, default=None, metavar="S", help="stop S seconds after the goal is reached")
+    p.add_argument("--duration", type=_finite_seconds, default=None, metavar="S", help="stop after S wall seconds")
+    p.add_argument("--exit-after-goal", type=_finite_seconds, default=None, metavar="S", help="stop S seconds after the goal is reached")
     p.add_argument("--json", action="store_true", help="print the run report as JSON")
     p.set_defaults(func=run)
+
+
+def _finite_seconds(text: str) -> float:
+    value = positive_seconds(text)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite seconds, got {text}")
+    return value
 
 
 def microsecond_clock() -> float:
@@ -56,7 +68,11 @@ def run(args: argparse.Namespace) -> int:
     offboard = scenario.loop.offboard_config(
         arm=args.arm, takeoff_alt_m=args.takeoff_alt, reengage=args.reengage or scenario.loop.reengage
     )
-    companion = Companion(scenario, offboard=offboard)
+    worker = PlanWorker(scenario.planner)  # a planning process beside the setpoint stream
+    if not worker.wait_ready(_PLANNER_START_S):
+        worker.close()
+        raise CompanionError(f"the planning process did not start within {_PLANNER_START_S:.0f} s")
+    companion = Companion(scenario, offboard=offboard, planning=worker)
 
     def stop(c: Companion) -> bool:
         t_goal = c.state.goal_reached_t_s
@@ -64,19 +80,30 @@ def run(args: argparse.Namespace) -> int:
             return c.records[-1].t_link_s - t_goal >= args.exit_after_goal
         return c.sequencer.phase.name == "GAVE_UP"
 
-    link = open_link(args.connect, tlog=args.tlog, clock=microsecond_clock)
+    try:
+        link = open_link(args.connect, tlog=args.tlog, clock=microsecond_clock)
+    except BaseException:
+        worker.close()
+        raise
     started = microsecond_clock()
+    stats = None
     try:
         stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock)
     except KeyboardInterrupt:
-        stats = None
+        pass
     finally:
         link.close()
+        worker.close()
     report = companion_report(companion)
     for key in ("events", "failsafe_events"):  # seconds since the start of this run, not epoch
         report[key] = [(round(t - started, 2), text) for t, text in report[key]]
     if stats is not None:
-        report["ticks"], report["late_ticks"] = stats.ticks, stats.late_ticks
+        report.update(stats.summary())
+        report["wall_s"] = round(stats.wall_s, 2)
+    report["planner_process"] = {
+        "solved": worker.stats.solved, "superseded": worker.stats.superseded, "errors": worker.stats.errors,
+        "max_solve_ms": round(worker.stats.max_solve_s * 1e3, 1),
+    }
     if args.json:
         print(json.dumps(report, indent=2, default=str))
     else:

@@ -42,8 +42,13 @@ SEV_INFO = mavlink2.MAV_SEVERITY_INFO
 
 _HEARTBEAT_PERIOD_S = 1.0
 _SLACK_WARN_PERIOD_S = 2.0
+_UNCONSTRAINED_WARN_PERIOD_S = 5.0
 
 Outbox = list[mavlink2.MAVLink_message]
+
+#: NAMED_VALUE_FLOAT sent at the tick a plan arrives when that is later than its request
+#: (real time): the value is the replan's number, so a replay applies it at the same tick.
+PLAN_ARRIVED = "plan_seq"
 
 
 class Companion:
@@ -86,6 +91,7 @@ class Companion:
         self._last_replan_t: float | None = None
         self._last_hb_t: float | None = None
         self._last_slack_warn = -math.inf
+        self._last_unconstrained_warn = -math.inf
         self._plan_too_old = False  # braking for an old plan was announced
 
     @property
@@ -163,12 +169,12 @@ class Companion:
             if self.state.mode not in (LoopMode.WAITING, LoopMode.IDLE):
                 self.state.mode = LoopMode.IDLE
             self.executor.hold()
-            self._discard_plans("not streaming")
+            out.extend(self._collect_plans(t_s, apply=False))
             return out
         if not seq.engaged:
             self.state.mode = LoopMode.PRESTREAM
             command = self.executor.hold()  # hover while PX4 is asked to switch
-            self._discard_plans("not engaged")
+            out.extend(self._collect_plans(t_s, apply=False))
         else:
             command, said = self._engaged_command(t_s)
             out.extend(said)
@@ -181,9 +187,20 @@ class Companion:
         logger.info("%s", text)
         return messages.statustext(severity, text)
 
-    def _discard_plans(self, why: str) -> None:
+    def _collect_plans(self, t_s: float, *, apply: bool) -> Outbox:
+        """Take the plans that arrived; adopt them, or discard them (not in control, estimate stale).
+
+        A plan arriving at a later tick than its request is announced (:data:`PLAN_ARRIVED`).
+        """
+        said: Outbox = []
         for result in self.planning.collect():
-            logger.debug("plan of replan %d discarded: %s", result.job.seq, why)
+            if result.job.t_link_s != t_s:
+                said.append(messages.named_value_float(int(round(t_s * 1000)), PLAN_ARRIVED, float(result.job.seq)))
+            if apply:
+                said.extend(self._apply_plan(result, t_s))
+            else:
+                logger.debug("plan of replan %d discarded: the loop is not flying a plan", result.job.seq)
+        return said
 
     def _engaged_command(self, t_s: float) -> tuple[np.ndarray, Outbox]:
         said: Outbox = []
@@ -195,7 +212,7 @@ class Companion:
                 said.append(self._say(t_s, SEV_WARNING, "companion: estimate stale, braking"))
             self.state.mode = LoopMode.STALE
             self.executor.drop()
-            self._discard_plans("estimate stale")
+            said.extend(self._collect_plans(t_s, apply=False))
             return self.executor.brake(), said
         if self.state.mode is LoopMode.STALE:
             said.append(self._say(t_s, SEV_NOTICE, "companion: estimate back, resuming"))
@@ -203,8 +220,7 @@ class Companion:
         # Replan every replan_period, also while braking for lack of a plan (no 20 Hz retry storm).
         if self._last_replan_t is None or t_s - self._last_replan_t >= self.cfg.replan_period_s - 1e-9:
             said.extend(self._request_plan(t_s, t_v))
-        for result in self.planning.collect():
-            said.extend(self._apply_plan(result, t_s))
+        said.extend(self._collect_plans(t_s, apply=True))
         command, why = self.executor.follow(t_s, t_v)
         if why is Follow.PLAN:
             if self.state.mode is LoopMode.BRAKING:
@@ -237,6 +253,13 @@ class Companion:
         if self.state.goal_reached_t_s is None and self.builder.at_goal(job.position):
             self.state.goal_reached_t_s = t_s
             said.append(self._say(t_s, SEV_INFO, "companion: goal reached"))
+        left_out = len(job.tracks_unconstrained)
+        if left_out:
+            self.state.tracks_unconstrained_max = max(self.state.tracks_unconstrained_max, left_out)
+            if t_s - self._last_unconstrained_warn >= _UNCONSTRAINED_WARN_PERIOD_S:
+                self._last_unconstrained_warn = t_s
+                limit = self.loop.max_constrained_tracks
+                said.append(self._say(t_s, SEV_NOTICE, f"companion: {left_out} tracks beyond {limit} not constrained"))
         if job.realised_contour:
             said.append(messages.named_value_float(int(round(t_s * 1000)), "ct_min", min(job.realised_contour.values())))
         self.planning.submit(job)

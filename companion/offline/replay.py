@@ -15,8 +15,10 @@ records with no inbound record between them, ended by its SET_POSITION_TARGET_LO
 (the last message of a streaming tick), and its time is the stamp of its first record.
 Ticks that sent nothing (the companion ticks at ``setpoint_rate_hz`` from its first tick
 on, and a tick that is not streaming and not due a HEARTBEAT sends nothing) are put back
-on the setpoint-rate grid between recorded ticks and after the last one up to the end of
-the log, each after the inbound records stamped up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
+on the setpoint-rate grid between recorded ticks (never between two ticks that both sent a
+setpoint: a streaming companion sends one every tick, so a wider gap there is a tick that
+ran late in real time) and after the last one up to the end of the log, each after the
+inbound records stamped up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
 
 *What-if* (no companion packets: mavsim's own ``--tlog``, a MAVProxy or QGroundControl
 log). The companion ticks at its setpoint rate over the log's duration, and since no
@@ -58,7 +60,10 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink import messages
-from companion.loop.app import Companion
+from companion.core.planner import Planner
+from companion.loop.app import PLAN_ARRIVED, Companion
+from companion.loop.planning import PlanResult
+from companion.loop.request_builder import ReplanJob
 from companion.loop.records import status_counts
 from companion.errors import CompanionError
 from companion.mavlink.link import DEFAULT_SOURCE_COMPONENT, DEFAULT_SOURCE_SYSTEM, Received
@@ -221,6 +226,48 @@ class AssumeEngaged:
         )
 
 
+class RecordedArrivals:
+    """The :class:`~companion.loop.planning.PlanningService` of a replay of a real-time log.
+
+    In real time a plan arrives some ticks after its request, and ``companion fly``
+    announces the arrival (NAMED_VALUE_FLOAT :data:`~companion.loop.app.PLAN_ARRIVED`,
+    the replan's number). The replay sets :attr:`arrivals` from the recorded tick before
+    each tick; a job is solved when its arrival comes, so the replayed planner solves the
+    same jobs in the same order as the recorded one (its warm starts match) and its plan
+    is applied at the same tick. Jobs the recording never solved (superseded) are dropped.
+    """
+
+    def __init__(self, planner: Planner) -> None:
+        self.planner = planner
+        self.arrivals: list[int] = []
+        self.missing = 0
+        self._jobs: dict[int, ReplanJob] = {}
+
+    def submit(self, job: ReplanJob) -> None:
+        self._jobs[job.seq] = job
+
+    def collect(self) -> list[PlanResult]:
+        done = []
+        for seq in self.arrivals:
+            job = self._jobs.pop(seq, None)
+            if job is None:
+                self.missing += 1
+                continue
+            for older in [s for s in self._jobs if s < seq]:
+                del self._jobs[older]
+            done.append(PlanResult(job, self.planner.solve(job.request, warm_start=job.warm_start)))
+        self.arrivals = []
+        return done
+
+
+def _arrivals(recorded: list) -> list[int]:
+    """Replan numbers announced as arrived among a recorded tick's messages."""
+    return [
+        int(m.value) for m in recorded
+        if m.get_type() == "NAMED_VALUE_FLOAT" and str(m.name).rstrip("\x00") == PLAN_ARRIVED
+    ]
+
+
 # --------------------------------------------------------------------------- log reading
 
 
@@ -359,7 +406,12 @@ def replay(
     if mode == "compare" and not lockstep:
         notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
 
-    companion = Companion(scenario, offboard=offboard, sequencer=AssumeEngaged() if assume_engaged else None)
+    realtime_plans = any(_arrivals(ev.recorded) for ev in events if isinstance(ev, _Tick))
+    schedule = RecordedArrivals(Planner(scenario.planner)) if realtime_plans else None
+    if realtime_plans:
+        notes.append("plans applied at the ticks the recording announced their arrival (real-time planning)")
+    companion = Companion(scenario, offboard=offboard, sequencer=AssumeEngaged() if assume_engaged else None,
+                          planning=schedule)
     if assume_engaged:
         notes.append("offboard sequence assumed engaged from the first autopilot HEARTBEAT (what-if)")
 
@@ -371,6 +423,8 @@ def replay(
             companion.handle(Received(ev.t_us * 1e-6, ev.msg, ev.raw))
             continue
         t = ev.t_us * 1e-6
+        if schedule is not None:
+            schedule.arrivals = _arrivals(ev.recorded)
         out = companion.tick(t)
         ticks += 1
         sp = next((m for m in reversed(out) if m.get_type() == _SETPOINT), None)
@@ -398,6 +452,8 @@ def replay(
         max_diff, max_t = diffs[i_max]
     else:
         i_max, max_diff, max_t = None, None, None
+    if schedule is not None and schedule.missing:
+        notes.append(f"{schedule.missing} announced plan arrivals had no matching replan request (the log and the scenario disagree)")
     statuses = status_counts(r.status for r in companion.records)
     result = ReplayResult(
         path=path,
@@ -461,7 +517,10 @@ def _schedule(stream: list[tuple[bool, _Rec]], period_us: int) -> list:
     gaps = {}
     for a, b in zip(ticks, ticks[1:]):
         silent, t = deque(), a.t_us + period_us
-        while t < b.t_us - period_us // 2:
+        # Between two streaming ticks there is none that sent nothing (a streaming tick always
+        # sends its setpoint): a wider gap there is a late tick in real time, not a silent one.
+        streaming = a.setpoint is not None and b.setpoint is not None
+        while not streaming and t < b.t_us - period_us // 2:
             silent.append(t)
             t += period_us
         gaps[id(a)] = silent
