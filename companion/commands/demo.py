@@ -114,6 +114,21 @@ def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out
     return summary
 
 
+_FLY_START_S = 60.0
+
+
+def _wait_for_listener(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
+    """Wait (bounded) until a process has bound UDP ``port`` on loopback, or has exited."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and proc.poll() is None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                return  # taken: fly is listening
+        time.sleep(0.05)
+
+
 def _crowd(scenario: Path, n: int, seed: int, target_port: int, clock_port: int):
     """Start ``n`` stationary systems beside the scenario's route (see :mod:`companion.offline.crowd`)."""
     import tomllib
@@ -154,6 +169,10 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
         fly_cmd += ["--formulation", overrides["formulation"]]
     if "c_max" in overrides:
         fly_cmd += ["--no-c-max"]
+    # fly first: mavsim's clock starts when it does, and a companion still importing would
+    # find the scenario's obstacles already on their way.
+    fly = subprocess.Popen(fly_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _wait_for_listener(api_port, fly, _FLY_START_S)
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     crowd = None
     fly_error = None
@@ -161,20 +180,23 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
         if args.crowd:
             crowd = _crowd(scenario, args.crowd, args.seed, api_port, gcs_port)
         try:
-            fly = subprocess.run(fly_cmd, capture_output=True, text=True, timeout=fly_duration_s + 60.0)
-            fly_out, fly_err = fly.stdout, fly.stderr
-        except subprocess.TimeoutExpired:  # run() has killed it
-            fly_out, fly_err = "", ""
+            fly_out, fly_err = fly.communicate(timeout=fly_duration_s + 60.0)
+        except subprocess.TimeoutExpired:
+            fly.kill()
+            fly_out, fly_err = fly.communicate()
             fly_error = f"companion fly did not end within {fly_duration_s + 60.0:.0f} s and was stopped"
     finally:
+        if fly.poll() is None:
+            fly.kill()
+            fly.communicate()
         if crowd is not None:
             crowd.stop()
         sim.send_signal(signal.SIGINT)  # mavsim prints its ground-truth summary on SIGINT
         try:
-            sim_out, _ = sim.communicate(timeout=10)
+            sim_out, sim_err = sim.communicate(timeout=10)
         except subprocess.TimeoutExpired:
             sim.kill()
-            sim_out, _ = sim.communicate()
+            sim_out, sim_err = sim.communicate()
     if fly_out.strip().startswith("{"):
         summary = json.loads(fly_out)
     else:
@@ -185,6 +207,8 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
         truth = {}
     # No truth (mavsim failed to report): its keys stay out rather than read "no collision".
     summary = {"mode": "realtime", **(truth_report(truth) if truth else {}), **summary}
+    if not truth:
+        summary["sim_error"] = (sim_err or "mavsim printed no summary")[-2000:]
     if crowd is not None:
         summary["crowd_systems"] = args.crowd
         summary["crowd_reports_sent"] = crowd.stats.sent

@@ -15,6 +15,7 @@ from companion.loop.app import Companion
 from companion.loop.config import load_scenario
 from companion.loop.realtime import PlanWorker, run_realtime
 from companion.mavlink.link import DEFAULT_URL, open_link
+from companion.mavlink.tlog import TlogWriter
 from companion.offline.report import companion_report, format_report
 
 logger = logging.getLogger(__name__)
@@ -80,20 +81,26 @@ def run(args: argparse.Namespace) -> int:
             return c.records[-1].t_link_s - t_goal >= args.exit_after_goal
         return c.sequencer.phase.name == "GAVE_UP"
 
+    tlog = None
     try:
-        link = open_link(args.connect, tlog=args.tlog, clock=microsecond_clock)
+        tlog = TlogWriter(args.tlog) if args.tlog else None  # the stream writes it, in handling order
+        link = open_link(args.connect, clock=microsecond_clock)
     except BaseException:
         worker.close()
+        if tlog is not None:
+            tlog.close()
         raise
     started = microsecond_clock()
     stats = None
     try:
-        stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock)
+        stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock, tlog=tlog)
     except KeyboardInterrupt:
         pass
     finally:
         link.close()
         worker.close()
+        if tlog is not None:
+            tlog.close()
     report = companion_report(companion)
     for key in ("events", "failsafe_events"):  # seconds since the start of this run, not epoch
         report[key] = [(round(t - started, 2), text) for t, text in report[key]]

@@ -23,6 +23,7 @@ import logging
 import math
 import multiprocessing
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Callable
@@ -32,11 +33,14 @@ from companion.loop.app import Companion
 from companion.loop.planning import PlanResult
 from companion.loop.request_builder import ReplanJob
 from companion.mavlink.link import Link
+from companion.mavlink.tlog import TlogWriter
 
 logger = logging.getLogger(__name__)
 
 _SETPOINT = "SET_POSITION_TARGET_LOCAL_NED"
 _WORKER_JOIN_S = 2.0
+_MAX_BACKLOG = 2000            # obstacle messages waiting; beyond, the oldest are dropped
+_MIN_OBSTACLE_MESSAGES = 20    # obstacle messages handled per loop even when a tick is due
 
 
 @dataclass
@@ -227,6 +231,8 @@ class StreamStats:
     last_setpoint_s: float | None = None
     setpoint_gaps_s: list = field(default_factory=list)
     max_tick_s: float = 0.0
+    inbound_dropped: int = 0
+    inbound_backlog_at_end: int = 0
 
     def note_setpoint(self, t_s: float) -> None:
         if self.last_setpoint_s is not None:
@@ -248,6 +254,7 @@ class StreamStats:
             "setpoint_gap_max_ms": round(max(gaps) * 1e3, 1) if gaps else None,
             "setpoint_gaps_over_150ms": sum(g > gap_limit_s for g in gaps),
             "tick_max_ms": round(self.max_tick_s * 1e3, 1),
+            "inbound_dropped": self.inbound_dropped,
         }
 
 
@@ -260,11 +267,21 @@ def run_realtime(
     clock: Callable[[], float] = time.time,
     sleep: Callable[[float], None] = time.sleep,
     poll_period_s: float = 0.002,
+    tlog: TlogWriter | None = None,
 ) -> StreamStats:
     """Run the companion against a live link until ``duration_s`` passes or ``stop(companion)``.
 
     The companion should plan through a :class:`PlanWorker` (``Companion(...,
     planning=worker)``); with inline planning a tick lasts as long as a solve.
+
+    Inbound messages wait in two queues: the autopilot's (and every HEARTBEAT) and the
+    rest (obstacle traffic). Each loop handles all of the first and as many of the rest as
+    fit before the next tick is due (at least ``_MIN_OBSTACLE_MESSAGES``), so a flood of
+    obstacle reports delays neither the setpoints nor the drone's own estimate. Past
+    ``_MAX_BACKLOG`` waiting obstacle messages the oldest are dropped and counted
+    (``StreamStats.inbound_dropped``). The tlog is written here, in the order the
+    companion handled the messages (each stamped with its arrival), so a replay feeds
+    them in that order and reproduces the commands; open the link without a tlog.
 
     Parameters
     ----------
@@ -274,23 +291,46 @@ def run_realtime(
         The loop ends at the first poll after it (a tick never waits for the planner).
     stop : checked after every tick.
     clock, sleep : injectable for tests.
+    tlog : record every message handled and every packet sent.
     """
     if duration_s is not None and not (math.isfinite(duration_s) and duration_s >= 0.0):
         raise ValueError(f"duration_s must be finite seconds >= 0, got {duration_s!r}")
     period = 1.0 / companion.loop.setpoint_rate_hz
     stats = StreamStats()
+    vehicle: deque = deque()
+    others: deque = deque()
+
+    def handle(rx) -> None:
+        companion.handle(rx)
+        if tlog is not None:
+            tlog.write(rx.t_s, rx.raw)
+
     start = clock()
     next_tick = start
     while True:
         now = clock()
         if duration_s is not None and now - start >= duration_s:
             break
+        autopilot = companion.autopilot
         for rx in link.poll():
-            companion.handle(rx)
+            first = rx.msg.get_type() == "HEARTBEAT" or (autopilot is not None and rx.msg.get_srcSystem() == autopilot[0])
+            (vehicle if first else others).append(rx)
+        while len(others) > _MAX_BACKLOG:
+            others.popleft()
+            stats.inbound_dropped += 1
+        while vehicle:
+            handle(vehicle.popleft())
+        handled = 0
+        while others and (handled < _MIN_OBSTACLE_MESSAGES or clock() < next_tick):
+            handle(others.popleft())
+            handled += 1
+        now = clock()
         if now >= next_tick:
             outbox = companion.tick(now)
             for msg in outbox:
-                link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times
+                packet = link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times
+                if tlog is not None:
+                    tlog.write(now, packet)
             if outbox and outbox[-1].get_type() == _SETPOINT:
                 stats.note_setpoint(now)
             stats.ticks += 1
@@ -301,6 +341,8 @@ def run_realtime(
                 next_tick = now + period
             if stop is not None and stop(companion):
                 break
-        sleep(max(0.0, min(poll_period_s, next_tick - clock())))
+        if not others:
+            sleep(max(0.0, min(poll_period_s, next_tick - clock())))
     stats.wall_s = clock() - start
+    stats.inbound_backlog_at_end = len(others)
     return stats

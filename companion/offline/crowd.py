@@ -71,7 +71,7 @@ class Crowd:
         Reports per second per system (spread evenly over the period).
     """
 
-    def __init__(self, positions: np.ndarray, target: tuple[str, int], clock_port: int, *, rate_hz: float = 2.0) -> None:
+    def __init__(self, positions: np.ndarray, target: tuple[str, int], clock_port: int, *, rate_hz: float = 1.0) -> None:
         positions = np.asarray(positions, dtype=float).reshape(-1, 3)
         if len(positions) > MAX_SYSTEMS:
             raise ValueError(f"at most {MAX_SYSTEMS} crowd systems, got {len(positions)}")

@@ -1,5 +1,8 @@
 """Replay a MAVLink tlog through the companion's estimator and planner, in log time.
 
+(About 450 lines: one job, rebuilding the recorded ticks and comparing the commands;
+the stand-ins for the live edge are in :mod:`companion.offline.replay_stand_ins`.)
+
 :func:`replay` reads a tlog (:func:`companion.mavlink.tlog.read_tlog`), feeds every *inbound*
 message (from any source other than the companion's own (system, component), by
 default (1, 191): the autopilot, obstacle systems, a ground station) to a fresh
@@ -42,6 +45,13 @@ times and therefore bit-identical commands. For a real-time log the recorded sta
 the link's clock when each packet was sent (a few microseconds after the tick's own
 clock reading), so its replay agrees only to that timing.
 
+Plans in real time. ``companion fly`` plans in a process beside the stream, so a plan
+is applied some ticks after its request; the tick it arrived at carries a
+NAMED_VALUE_FLOAT ``plan_seq`` (:data:`companion.loop.app.PLAN_ARRIVED`). A log with such
+announcements is replayed with :class:`~companion.offline.replay_stand_ins.RecordedArrivals`:
+each plan is solved when its arrival comes and applied at that tick, so a real-time log
+reproduces its commands exactly. Lockstep logs have none: plans apply at their request's tick.
+
 Comparison. SET_POSITION_TARGET_LOCAL_NED carries float32 velocities, so the replayed
 velocities are rounded to float32 exactly as packing would before they are compared:
 an exact reproduction gives a difference of 0.0, and any real discrepancy shows.
@@ -61,13 +71,12 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink import messages
 from companion.core.planner import Planner
-from companion.loop.app import PLAN_ARRIVED, Companion
-from companion.loop.planning import PlanResult
-from companion.loop.request_builder import ReplanJob
+from companion.loop.app import Companion
+from companion.offline.replay_stand_ins import AssumeEngaged, RecordedArrivals, arrivals
 from companion.loop.records import status_counts
 from companion.errors import CompanionError
 from companion.mavlink.link import DEFAULT_SOURCE_COMPONENT, DEFAULT_SOURCE_SYSTEM, Received
-from companion.mavlink.offboard import OffboardConfig, Phase, SequencerState
+from companion.mavlink.offboard import OffboardConfig
 from companion.loop.config import load_scenario
 from companion.mavlink.tlog import LOCKSTEP_EPOCH_S, read_tlog
 
@@ -176,96 +185,6 @@ class ReplayResult:
             "events": [(round(t, 3), text) for t, text in state.events],
             "notes": list(self.notes),
         }
-
-
-# --------------------------------------------------------------------------- what-if stand-in
-
-
-class AssumeEngaged:
-    """The :class:`~companion.loop.engagement.OffboardSequence` of a what-if replay.
-
-    Streams and counts as engaged from the first PX4 autopilot HEARTBEAT on; sends no
-    commands. Used only for logs in which no companion ever asked for OFFBOARD.
-    """
-
-    def __init__(self) -> None:
-        self._target: tuple[int, int] | None = None
-        self._since: float | None = None
-        self.events: list = []
-
-    def on_heartbeat(self, t_s: float, hb: messages.VehicleHeartbeat) -> None:
-        if hb.is_autopilot and self._target is None:
-            self._target, self._since = hb.key, t_s
-
-    def on_ack(self, t_s: float, ack: messages.CommandAck) -> None:
-        """Ignored: nothing was asked."""
-
-    def on_statustext(self, t_s: float, text: str) -> None:
-        """Ignored."""
-
-    def on_home_altitude(self, alt_amsl_m: float) -> None:
-        """Ignored."""
-
-    def step(self, t_s: float) -> list:
-        return []
-
-    @property
-    def target(self) -> tuple[int, int] | None:
-        return self._target
-
-    @property
-    def phase(self) -> Phase:
-        return Phase.ENGAGED if self._target is not None else Phase.WAIT_AUTOPILOT
-
-    @property
-    def state(self) -> SequencerState:
-        engaged = self._target is not None
-        return SequencerState(
-            phase=self.phase, streaming=engaged, engaged=engaged, since_s=self._since, attempts=0,
-            reason="replay what-if: assumed engaged from the first autopilot HEARTBEAT",
-        )
-
-
-class RecordedArrivals:
-    """The :class:`~companion.loop.planning.PlanningService` of a replay of a real-time log.
-
-    In real time a plan arrives some ticks after its request, and ``companion fly``
-    announces the arrival (NAMED_VALUE_FLOAT :data:`~companion.loop.app.PLAN_ARRIVED`,
-    the replan's number). The replay sets :attr:`arrivals` from the recorded tick before
-    each tick; a job is solved when its arrival comes, so the replayed planner solves the
-    same jobs in the same order as the recorded one (its warm starts match) and its plan
-    is applied at the same tick. Jobs the recording never solved (superseded) are dropped.
-    """
-
-    def __init__(self, planner: Planner) -> None:
-        self.planner = planner
-        self.arrivals: list[int] = []
-        self.missing = 0
-        self._jobs: dict[int, ReplanJob] = {}
-
-    def submit(self, job: ReplanJob) -> None:
-        self._jobs[job.seq] = job
-
-    def collect(self) -> list[PlanResult]:
-        done = []
-        for seq in self.arrivals:
-            job = self._jobs.pop(seq, None)
-            if job is None:
-                self.missing += 1
-                continue
-            for older in [s for s in self._jobs if s < seq]:
-                del self._jobs[older]
-            done.append(PlanResult(job, self.planner.solve(job.request, warm_start=job.warm_start)))
-        self.arrivals = []
-        return done
-
-
-def _arrivals(recorded: list) -> list[int]:
-    """Replan numbers announced as arrived among a recorded tick's messages."""
-    return [
-        int(m.value) for m in recorded
-        if m.get_type() == "NAMED_VALUE_FLOAT" and str(m.name).rstrip("\x00") == PLAN_ARRIVED
-    ]
 
 
 # --------------------------------------------------------------------------- log reading
@@ -406,7 +325,7 @@ def replay(
     if mode == "compare" and not lockstep:
         notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
 
-    realtime_plans = any(_arrivals(ev.recorded) for ev in events if isinstance(ev, _Tick))
+    realtime_plans = any(arrivals(ev.recorded) for ev in events if isinstance(ev, _Tick))
     schedule = RecordedArrivals(Planner(scenario.planner)) if realtime_plans else None
     if realtime_plans:
         notes.append("plans applied at the ticks the recording announced their arrival (real-time planning)")
@@ -424,7 +343,7 @@ def replay(
             continue
         t = ev.t_us * 1e-6
         if schedule is not None:
-            schedule.arrivals = _arrivals(ev.recorded)
+            schedule.arrivals = arrivals(ev.recorded)
         out = companion.tick(t)
         ticks += 1
         sp = next((m for m in reversed(out) if m.get_type() == _SETPOINT), None)
