@@ -193,7 +193,7 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
             crowd.stop()
         sim.send_signal(signal.SIGINT)  # mavsim prints its ground-truth summary on SIGINT
         try:
-            sim_out, sim_err = sim.communicate(timeout=10)
+            sim_out, sim_err = sim.communicate(timeout=30)
         except subprocess.TimeoutExpired:
             sim.kill()
             sim_out, sim_err = sim.communicate()

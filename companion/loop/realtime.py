@@ -40,7 +40,7 @@ logger = logging.getLogger(__name__)
 _SETPOINT = "SET_POSITION_TARGET_LOCAL_NED"
 _WORKER_JOIN_S = 2.0
 _MAX_BACKLOG = 2000            # obstacle messages waiting; beyond, the oldest are dropped
-_MIN_OBSTACLE_MESSAGES = 20    # obstacle messages handled per loop even when a tick is due
+_MIN_OBSTACLE_MESSAGES = 5     # obstacle messages handled per loop even when a tick is due
 
 
 @dataclass
