@@ -189,6 +189,18 @@ def load_scenario(path: str | Path, **planner_overrides: Any) -> CompanionScenar
         raise ConfigError(f"{path}: scenario file not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    return scenario_from_dict(data, str(path), **planner_overrides)
+
+
+def scenario_from_dict(data: dict[str, Any], source: str = "<dict>", **planner_overrides: Any) -> CompanionScenario:
+    """The companion's sections of a parsed scenario (``tomllib`` output; ``source`` names it in errors).
+
+    Raises
+    ------
+    ConfigError
+        As :func:`load_scenario`, naming ``source`` instead of a file.
+    """
+    path = Path(source)
     unknown = sorted(set(data) - _TOP_LEVEL)
     if unknown:
         raise ConfigError(f"{path}: unknown section(s) {', '.join(unknown)}")
