@@ -30,6 +30,7 @@ RULES: dict[str, tuple[str, ...]] = {
     "companion/plots": ("companion.loop", "companion.mavlink", "companion.offline", "companion.commands", "mavsim"),
     "estimator": ("companion", "mavsim", "pymavlink", "osqp", "matplotlib", "socket", "threading"),
     "mavsim": ("companion", "estimator", "osqp", "filterpy", "matplotlib"),
+    "mavsign": ("companion", "estimator", "mavsim", "numpy", "osqp", "filterpy", "matplotlib", "socket", "threading"),
 }
 
 
@@ -76,7 +77,7 @@ def test_that_every_package_in_the_tree_is_listed_for_the_wheel():
     """pyproject.toml lists its packages (configs/ is mapped to companion.scenarios): none may be forgotten."""
     listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
     found = {"companion.scenarios"}
-    for top in ("companion", "estimator", "mavsim"):
+    for top in ("companion", "estimator", "mavsign", "mavsim"):
         for init in (ROOT / top).rglob("__init__.py"):
             found.add(".".join(init.parent.relative_to(ROOT).parts))
     assert listed == found

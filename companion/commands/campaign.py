@@ -16,7 +16,7 @@ import json
 import logging
 from pathlib import Path
 
-from companion.commands._argtypes import integer_at_least, open_unit_interval, positive_seconds
+from companion.commands._argtypes import integer_at_least, open_unit_interval, output_file, positive_seconds, seed
 from companion.offline.campaign import DEFAULT_DURATION_S, FAMILIES, METHODS, format_table, run_campaign
 
 logger = logging.getLogger(__name__)
@@ -42,13 +42,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--episodes", type=integer_at_least(1), default=20, help="number of episodes (indices 0..N-1)")
     p.add_argument("--methods", type=_methods, default=list(METHODS), help="comma-separated planner formulations",
                    metavar=",".join(METHODS))
-    p.add_argument("--seed", type=int, default=0, help="campaign seed (episode i uses default_rng([seed, i]))")
+    p.add_argument("--seed", type=seed, default=0, help="campaign seed (episode i uses default_rng([seed, i]))")
     p.add_argument("--workers", type=integer_at_least(1), default=None, help="worker processes (default: CPU count)")
     p.add_argument("--episode", type=integer_at_least(0), default=None, metavar="I",
                    help="run only episode I of this campaign (reproduce one encounter)")
     p.add_argument("--c-min", type=open_unit_interval, default=0.90, help="contour of touch that may not be crossed")
     p.add_argument("--duration", type=positive_seconds, default=DEFAULT_DURATION_S, help="simulated seconds per episode")
-    p.add_argument("--json", metavar="FILE", help="write the summary and per-episode rows as JSON")
+    p.add_argument("--json", type=output_file, metavar="FILE", help="write the summary and per-episode rows as JSON")
     p.add_argument("--plot", metavar="DIR", help="draw the campaign figures (PNG) into DIR")
     p.set_defaults(func=run)
 

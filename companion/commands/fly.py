@@ -3,16 +3,20 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import sys
 import time
 
+from companion.errors import ConfigError
 from companion.loop.app import Companion
+from mavsign import SigningKeyError, load_signing_key
 from companion.mavlink.link import DEFAULT_URL, open_link
 from companion.loop.realtime import run_realtime
 from companion.offline.report import companion_report, format_report
-from companion.loop.config import load_scenario
+from companion.commands._argtypes import nonnegative_seconds, output_file, positive_number, positive_seconds
+from companion.offline.scenario_file import load_both
 
 logger = logging.getLogger(__name__)
 
@@ -31,13 +35,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--connect", default=DEFAULT_URL, help=f"pymavlink connection string (default {DEFAULT_URL})")
     p.add_argument("--scenario", required=True, help="scenario TOML (mission, planner, estimator, map)")
     p.add_argument("--arm", action="store_true", help="arm the vehicle if it is disarmed")
-    p.add_argument("--takeoff-alt", type=float, default=None, metavar="M", help="take off to M metres above home first")
+    p.add_argument("--takeoff-alt", type=positive_number, default=None, metavar="M", help="take off to M metres above home first")
     p.add_argument("--reengage", action="store_true", help="re-request OFFBOARD after the pilot took over (default: never)")
     p.add_argument("--formulation", default=None, help="planner formulation (overrides the scenario)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
-    p.add_argument("--tlog", default=None, help="record the link to this tlog")
-    p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S wall seconds")
-    p.add_argument("--exit-after-goal", type=float, default=None, metavar="S", help="stop S seconds after the goal is reached")
+    p.add_argument("--tlog", type=output_file, default=None, help="record the link to this tlog")
+    p.add_argument("--duration", type=positive_seconds, default=None, metavar="S", help="stop after S wall seconds")
+    p.add_argument("--exit-after-goal", type=nonnegative_seconds, default=None, metavar="S", help="stop S seconds after the goal is reached")
+    p.add_argument("--signing-key-file", metavar="FILE",
+                   help="MAVLink 2 signing: the 32-byte key as 64 hex digits in FILE (sign all, reject unsigned)")
+    p.add_argument("--signing-key-env", metavar="NAME",
+                   help="MAVLink 2 signing: the key (64 hex digits) in environment variable NAME")
     p.add_argument("--json", action="store_true", help="print the run report as JSON")
     p.set_defaults(func=run)
 
@@ -52,9 +60,12 @@ def run(args: argparse.Namespace) -> int:
     overrides: dict = {"formulation": args.formulation} if args.formulation else {}
     if args.no_c_max:
         overrides["c_max"] = None
-    scenario = load_scenario(args.scenario, **overrides)
-    offboard = scenario.loop.offboard_config(
-        arm=args.arm, takeoff_alt_m=args.takeoff_alt, reengage=args.reengage or scenario.loop.reengage
+    scenario, _ = load_both(args.scenario, **overrides)  # mavsim's sections too: never accept what mavsim rejects
+    offboard = dataclasses.replace(
+        scenario.offboard,
+        arm=args.arm or scenario.offboard.arm,
+        takeoff_alt_m=scenario.offboard.takeoff_alt_m if args.takeoff_alt is None else args.takeoff_alt,
+        reengage=args.reengage or scenario.offboard.reengage,
     )
     companion = Companion(scenario, offboard=offboard)
 
@@ -64,7 +75,11 @@ def run(args: argparse.Namespace) -> int:
             return c.records[-1].t_link_s - t_goal >= args.exit_after_goal
         return c.sequencer.phase.name == "GAVE_UP"
 
-    link = open_link(args.connect, tlog=args.tlog, clock=microsecond_clock)
+    try:
+        signing_key = load_signing_key(args.signing_key_file, args.signing_key_env)
+    except SigningKeyError as exc:
+        raise ConfigError(str(exc)) from None
+    link = open_link(args.connect, tlog=args.tlog, clock=microsecond_clock, signing_key=signing_key)
     started = microsecond_clock()
     try:
         stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock)
@@ -77,6 +92,8 @@ def run(args: argparse.Namespace) -> int:
         report[key] = [(round(t - started, 2), text) for t, text in report[key]]
     if stats is not None:
         report["ticks"], report["late_ticks"] = stats.ticks, stats.late_ticks
+    report["signing"] = signing_key is not None
+    report["signature_rejected"] = link.stats.signature_rejected
     if args.json:
         print(json.dumps(report, indent=2, default=str))
     else:

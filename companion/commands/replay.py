@@ -13,6 +13,7 @@ import json
 import logging
 import sys
 
+from companion.commands._argtypes import finite_number
 from companion.offline.replay import replay
 
 logger = logging.getLogger(__name__)
@@ -32,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("log", metavar="LOG.tlog", help="the tlog to replay")
     p.add_argument("--scenario", required=True, help="scenario TOML the companion flew (mission, planner, estimator, map)")
     p.add_argument("--formulation", default=None, help="planner formulation the recorded run used (overrides the scenario)")
-    p.add_argument("--time-offset", type=float, default=None, metavar="S",
+    p.add_argument("--time-offset", type=finite_number, default=None, metavar="S",
                    help="seconds subtracted from tlog stamps (default: detect a lockstep log, else 0)")
     p.add_argument("--json", action="store_true", help="print the replay summary as JSON")
     p.add_argument("--plot", default=None, metavar="DIR", help="write the flight figures (PNG) here")

@@ -91,7 +91,7 @@ class Companion:
     scenario : CompanionScenario
         Mission, planner, estimator, map and loop settings (``companion.loop.config``).
     offboard : OffboardConfig, optional
-        Engagement settings (arming and takeoff are off unless asked for).
+        Engagement settings (default: the scenario's ``[offboard]`` table).
     """
 
     def __init__(self, scenario: CompanionScenario, offboard: OffboardConfig | None = None) -> None:
@@ -102,7 +102,7 @@ class Companion:
         self.drone = DroneFilter(scenario.drone_filter)
         self.tracker = ObstacleTracker(scenario.tracker)
         lp = scenario.loop
-        self.sequencer = OffboardSequencer(offboard or lp.offboard_config())
+        self.sequencer = OffboardSequencer(offboard or scenario.offboard)
         self.state = CompanionState()
         self.records: list[ReplanRecord] = []
         self._uses_odometry = False

@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink import messages, px4
-from companion.errors import ConfigError
+from companion import validation as check
 from companion.mavlink.messages import CommandAck, VehicleHeartbeat
 
 logger = logging.getLogger(__name__)
@@ -73,9 +73,13 @@ class Phase(enum.Enum):
 _STREAMING = frozenset({Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED})
 
 
+#: Upper bound of every offboard duration setting (s): a day is already absurd.
+MAX_OFFBOARD_SECONDS = 86_400.0
+
+
 @dataclass(frozen=True)
 class OffboardConfig:
-    """Settings of the offboard sequence.
+    """Settings of the offboard sequence (the scenario file's ``[offboard]`` table).
 
     Attributes
     ----------
@@ -112,16 +116,16 @@ class OffboardConfig:
     heartbeat_timeout_s: float = 3.0
 
     def __post_init__(self) -> None:
-        for name in ("prestream_s", "retry_period_s", "takeoff_timeout_s", "heartbeat_timeout_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
-                raise ConfigError(f"offboard config: {name} must be finite seconds >= 0, got {value!r}")
-        if self.retry_period_s <= 0.0 or self.heartbeat_timeout_s <= 0.0:
-            raise ConfigError("offboard config: retry_period_s and heartbeat_timeout_s must be > 0")
-        if not (isinstance(self.max_retries, int) and self.max_retries >= 0):
-            raise ConfigError(f"offboard config: max_retries must be an integer >= 0, got {self.max_retries!r}")
-        if self.takeoff_alt_m is not None and not (math.isfinite(self.takeoff_alt_m) and self.takeoff_alt_m > 0):
-            raise ConfigError(f"offboard config: takeoff_alt_m must be > 0 metres, got {self.takeoff_alt_m!r}")
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
+        for name in ("prestream_s", "takeoff_timeout_s"):
+            set_(name, check.number(name, getattr(self, name), lo=0.0, hi=MAX_OFFBOARD_SECONDS))
+        for name in ("retry_period_s", "heartbeat_timeout_s"):
+            set_(name, check.number(name, getattr(self, name), positive=True, hi=MAX_OFFBOARD_SECONDS))
+        check.integer("max_retries", self.max_retries, lo=0, hi=1000)
+        check.boolean("arm", self.arm)
+        check.boolean("reengage", self.reengage)
+        if self.takeoff_alt_m is not None:
+            set_("takeoff_alt_m", check.number("takeoff_alt_m", self.takeoff_alt_m, positive=True, hi=10_000.0))
 
 
 @dataclass(frozen=True)

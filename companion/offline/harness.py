@@ -24,11 +24,15 @@ from companion.mavlink.offboard import OffboardConfig
 from companion.offline.report import run_report
 from companion.loop.config import load_scenario
 from mavsim.lockstep import LockstepSimulator
+from mavsim.tlog import LOCKSTEP_EPOCH_US
 
 logger = logging.getLogger(__name__)
 
 #: ``drop(t_s, direction, packet) -> bool``; direction is ``"to_companion"`` or ``"to_vehicle"``.
 PacketFilter = Callable[[float, str, bytes], bool]
+
+#: mavsim's lockstep epoch (2024-01-01T00:00:00Z) in seconds: the stamp of simulated time 0 in lockstep tlogs.
+LOCKSTEP_EPOCH_S = LOCKSTEP_EPOCH_US / 1_000_000
 
 
 @dataclass
@@ -83,7 +87,7 @@ def run_lockstep(
     scenario = load_scenario(scenario_path, **planner_overrides)
     sim = LockstepSimulator.from_file(scenario_path, seed=seed, tlog=sim_tlog_path)
     companion = Companion(scenario, offboard=offboard)
-    link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path)
+    link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path, tlog_offset_s=LOCKSTEP_EPOCH_S)
     rng = np.random.default_rng([seed, 0xC0FFEE])
     dt = 1.0 / scenario.loop.setpoint_rate_hz
     limit = scenario.duration_s if duration_s is None else float(duration_s)

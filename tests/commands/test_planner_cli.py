@@ -42,6 +42,6 @@ def test_that_plan_plot_writes_a_png(tmp_path, capsys):
 
 def test_that_a_bad_scenario_is_a_clear_error(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
-    bad.write_text('[planner]\nc_min = 1.5\n[mission]\ngoal_ned_m = [1.0, 0.0, -5.0]\n')
+    bad.write_text('[planner]\nc_min = 1.5\n[mission]\ngoal_ned_m = [1.0, 0.0, -5.0]\ngoal_tolerance_m = 0.3\n')
     assert main(["plan", str(bad)]) == 2
     assert "c_min = 1.5" in capsys.readouterr().err
