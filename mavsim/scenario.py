@@ -1,5 +1,8 @@
 """Scenario files (``configs/*.toml``) as mavsim reads them.
 
+(Over 400 lines: about a third is the key reference below; the rest is one reader and
+its one typed accessor, which belong together so that each key sits beside its check.)
+
 mavsim owns ``[sim]`` and ``[world]`` (unknown keys there are rejected, naming file,
 section and key) and reads named keys of the shared sections: ``[scenario]`` (name,
 description, duration_s), ``[vehicle]`` (radius_m, start_ned_m), ``[mission]``
