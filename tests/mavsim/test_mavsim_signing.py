@@ -132,3 +132,35 @@ def test_that_signing_keys_come_from_a_file_or_the_environment_as_64_hex_digits(
         load_signing_key(path)
     with pytest.raises(SigningKeyError, match="not both"):
         load_signing_key(path, "TEST_MAVLINK_KEY")
+
+
+def test_that_over_udp_a_badly_signed_set_mode_land_changes_nothing_and_a_signed_one_lands():
+    import socket
+    import threading
+
+    from mavsim.udp import LinkAddress, UdpServer
+
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client.bind(("127.0.0.1", 0))
+    sim = Simulator(scenario_from_dict(AIRBORNE), seed=0, signing=(KEY, time.time()))
+    server = UdpServer(sim, [LinkAddress("api", 0, client.getsockname()[1])], speed=1.0)
+    thread = threading.Thread(target=server.run, args=(30.0,), daemon=True)
+    thread.start()
+    addr = ("127.0.0.1", server.local_ports["api"])
+    try:
+        client.sendto(set_mode_land(encoder(OTHER_KEY)), addr)
+        client.sendto(set_mode_land(encoder(None)), addr)
+        end = time.monotonic() + 3.0
+        while sim.stats["signature_rejected"] < 2 and time.monotonic() < end:
+            time.sleep(0.02)
+        time.sleep(0.2)
+        assert sim.stats["signature_rejected"] == 2 and sim.commander.mode == "AUTO.LOITER"
+        client.sendto(set_mode_land(encoder(KEY)), addr)
+        while sim.commander.mode != "AUTO.LAND" and time.monotonic() < end + 3.0:
+            time.sleep(0.02)
+        assert sim.commander.mode == "AUTO.LAND"
+    finally:
+        server.stop()
+        thread.join(timeout=5)
+        server.close()
+        client.close()
