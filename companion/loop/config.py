@@ -113,9 +113,10 @@ class MissionConfig:
     waypoint_spacing_m: float = 6.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "goal_ned_m", check.vector3("goal_ned_m", self.goal_ned_m))
-        object.__setattr__(self, "goal_tolerance_m", check.number("goal_tolerance_m", self.goal_tolerance_m, positive=True, hi=1000.0))
-        object.__setattr__(self, "waypoint_spacing_m", check.number("waypoint_spacing_m", self.waypoint_spacing_m, positive=True, hi=1e4))
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
+        set_("goal_ned_m", check.vector3("goal_ned_m", self.goal_ned_m))
+        set_("goal_tolerance_m", check.number("goal_tolerance_m", self.goal_tolerance_m, positive=True, hi=1000.0))
+        set_("waypoint_spacing_m", check.number("waypoint_spacing_m", self.waypoint_spacing_m, positive=True, hi=1e4))
 
     @property
     def goal(self) -> np.ndarray:
@@ -257,7 +258,7 @@ def scenario_from_data(data: Mapping[str, Any], path: str | Path, **planner_over
     path = Path(path)
     where = str(path)
     check.table(where, data)
-    unknown = sorted(set(data) - _COMPANION_SECTIONS - set(SIMULATOR_KEYS) )
+    unknown = sorted(set(data) - _COMPANION_SECTIONS - set(SIMULATOR_KEYS))
     if unknown:
         raise ConfigError(f"{path}: unknown section(s) {', '.join(unknown)}")
     _check_simulator_keys(data, path)

@@ -7,8 +7,10 @@ the low 2 bits of the stamp; readers ignore it (0.3 microseconds at most).
 
 Writing is plain file I/O (no clock: the caller passes the time of each record).
 In lockstep runs the harness passes mavsim's lockstep epoch
-(:data:`companion.offline.harness.LOCKSTEP_EPOCH_S`) plus simulated time, so the same seed writes a byte-identical log. Reading is record by record
-(bounded: one record at a time) and decodes with pymavlink's parser.
+(:data:`companion.offline.harness.LOCKSTEP_EPOCH_S`) plus simulated time, so the
+same seed writes a byte-identical log. Reading is record by record (bounded: one
+record at a time, at most :data:`MAX_PACKET_BYTES` after its stamp) and decodes
+with pymavlink's parser; a damaged record stops the read naming its byte offset.
 """
 
 from __future__ import annotations
