@@ -31,8 +31,13 @@ test: $(STAMP)
 bench: $(BSTAMP)
 	$(VPY) -m tests.benchmarks
 
+# The campaign appends every finished run to out/campaign.jsonl and resumes from it: run
+# `make campaign` again after an interruption. SCHEDULER=tcp://HOST:8786 runs it on a Dask
+# cluster (docs/CAMPAIGNS.md); CAMPAIGN_ARGS replaces the campaign's definition.
+CAMPAIGN_ARGS ?= --family antipodal --episodes 200 --methods hyperplane,paper,deterministic,bhattacharyya --seed 1
 campaign: $(STAMP)
-	$(VENV)/bin/companion campaign --family antipodal --episodes 200 --methods hyperplane,paper,deterministic,bhattacharyya --seed 1 --json out/campaign.json --plot out/campaign
+	$(VENV)/bin/companion campaign $(CAMPAIGN_ARGS) $(if $(SCHEDULER),--scheduler $(SCHEDULER)) \
+		--results out/campaign.jsonl --resume --json out/campaign.json --plot out/campaign
 
 campaign-test: $(STAMP)
 	$(VENV)/bin/pytest -q -m slow

@@ -46,7 +46,7 @@ def _float_type(holds: Callable[[float], bool], requirement: str, doc: str) -> C
 open_unit_interval = _float_type(lambda v: 0.0 < v < 1.0, "lie in the open interval (0, 1)",
                                  "A float in the open interval (0, 1): a probability, a confidence, an overlap.")
 positive_seconds = _float_type(lambda v: v > 0.0, "be > 0 s", "A duration in seconds, > 0 (finite).")
-nonnegative_seconds = _float_type(lambda v: v >= 0.0, "be >= 0 s", "A duration in seconds, >= 0 (finite).")
+non_negative_seconds = _float_type(lambda v: v >= 0.0, "be >= 0 s", "A duration in seconds, >= 0 (finite).")
 positive_number = _float_type(lambda v: v > 0.0, "be > 0", "A finite number > 0 (metres, a speed factor).")
 finite_number = _float_type(lambda v: True, "be finite", "Any finite number.")
 

@@ -15,7 +15,7 @@ from mavsign import SigningKeyError, load_signing_key
 from companion.mavlink.link import DEFAULT_URL, open_link
 from companion.loop.realtime import run_realtime
 from companion.offline.report import companion_report, format_report
-from companion.commands._argtypes import nonnegative_seconds, output_file, positive_number, positive_seconds
+from companion.commands._argtypes import non_negative_seconds, output_file, positive_number, positive_seconds
 from companion.offline.scenario_file import load_both
 
 logger = logging.getLogger(__name__)
@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--tlog", type=output_file, default=None, help="record the link to this tlog")
     p.add_argument("--duration", type=positive_seconds, default=None, metavar="S", help="stop after S wall seconds")
-    p.add_argument("--exit-after-goal", type=nonnegative_seconds, default=None, metavar="S", help="stop S seconds after the goal is reached")
+    p.add_argument("--exit-after-goal", type=non_negative_seconds, default=None, metavar="S", help="stop S seconds after the goal is reached")
     p.add_argument("--signing-key-file", metavar="FILE",
                    help="MAVLink 2 signing: the 32-byte key as 64 hex digits in FILE (sign all, reject unsigned)")
     p.add_argument("--signing-key-env", metavar="NAME",

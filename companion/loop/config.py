@@ -43,7 +43,7 @@ _COMPANION_SECTIONS = {"scenario", "vehicle", "mission", "planner", "estimator",
 SIMULATOR_KEYS: dict[str, frozenset[str]] = {
     "sim": frozenset({
         "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2",
-        "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
+        "position_noise_correlation_s", "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
         "home_lat_deg", "home_lon_deg", "home_alt_m", "arming_delay_s", "offboard_reject_ack",
         "params", "stream_rates_hz",
     }),
@@ -188,7 +188,7 @@ class CompanionScenario:
 
 
 def load_scenario(path: str | Path, **planner_overrides: Any) -> CompanionScenario:
-    """Read the companion's sections of a scenario TOML file (see :func:`scenario_from_data`).
+    """Read the companion's sections of a scenario TOML file (see :func:`scenario_from_dict`).
 
     Raises
     ------
@@ -196,7 +196,7 @@ def load_scenario(path: str | Path, **planner_overrides: Any) -> CompanionScenar
         The file cannot be read or parsed, or a section has a bad value or an unknown
         key (the message names the file, section and key).
     """
-    return scenario_from_data(read_scenario_toml(path), Path(path), **planner_overrides)
+    return scenario_from_dict(read_scenario_toml(path), Path(path), **planner_overrides)
 
 
 def _section(data: Mapping[str, Any], name: str, where: str) -> Mapping[str, Any]:
@@ -246,13 +246,13 @@ def _map(data: Mapping[str, Any], path: Path) -> tuple[tuple[Wall, ...], tuple[S
     return tuple(walls), tuple(statics)
 
 
-def scenario_from_data(data: Mapping[str, Any], path: str | Path, **planner_overrides: Any) -> CompanionScenario:
-    """The companion's scenario from parsed TOML (``path`` names the file in errors).
+def scenario_from_dict(data: Mapping[str, Any], path: str | Path = "<dict>", **planner_overrides: Any) -> CompanionScenario:
+    """The companion's scenario from parsed TOML (``path`` names the file, or the source, in errors).
 
     Parameters
     ----------
-    data : the parsed file (:func:`read_scenario_toml`).
-    path : where it came from.
+    data : the parsed file (:func:`read_scenario_toml`, or a generated scenario).
+    path : where it came from (a file, or e.g. ``"<scenario name>"``).
     **planner_overrides : values that replace ``[planner]`` keys (e.g. ``formulation``).
     """
     path = Path(path)

@@ -18,11 +18,11 @@ from typing import Any
 import numpy as np
 
 from companion.errors import ConfigError
-from companion.loop.config import CompanionScenario, read_scenario_toml, scenario_from_data
+from companion.loop.config import CompanionScenario, read_scenario_toml, scenario_from_dict
 from mavsim.errors import ScenarioError
 from mavsim.obstacles import ObstacleTrack
 from mavsim.scenario import Scenario as SimScenario
-from mavsim.scenario import scenario_from_dict
+from mavsim.scenario import scenario_from_dict as sim_scenario_from_dict
 
 logger = logging.getLogger(__name__)
 
@@ -36,9 +36,9 @@ def load_both(path: str | Path, **planner_overrides: Any) -> tuple[CompanionScen
         Either program rejects the file (the message names the file, section and key).
     """
     data = read_scenario_toml(path)
-    companion = scenario_from_data(data, path, **planner_overrides)
+    companion = scenario_from_dict(data, path, **planner_overrides)
     try:
-        sim = scenario_from_dict(data, str(path))
+        sim = sim_scenario_from_dict(data, str(path))
     except ScenarioError as exc:
         raise ConfigError(str(exc)) from None
     return companion, sim
