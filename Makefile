@@ -5,7 +5,10 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 BSTAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench campaign campaign-test venv clean
+.PHONY: demo test bench campaign campaign-test px4-test venv clean
+
+# PX4 SITL build with start-sih (see docs/PX4.md); `make px4-test` flies the companion against it.
+PX4_SITL_DIR ?= ../shared/px4-sitl
 
 $(VPY):
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python 3.11 or newer is needed, found " + sys.version' 
@@ -41,6 +44,9 @@ campaign: $(STAMP)
 
 campaign-test: $(STAMP)
 	$(VENV)/bin/pytest -q -m slow
+
+px4-test: $(STAMP)
+	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -s -m px4 tests/px4
 
 clean:
 	rm -rf $(VENV) out bench-results.json

@@ -41,7 +41,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--tlog", type=output_file, default=None, help="record the link to this tlog")
     p.add_argument("--duration", type=positive_seconds, default=None, metavar="S", help="stop after S wall seconds")
-    p.add_argument("--exit-after-goal", type=non_negative_seconds, default=None, metavar="S", help="stop S seconds after the goal is reached")
+    p.add_argument("--exit-after-goal", type=non_negative_seconds, default=None, metavar="S",
+                   help="S seconds after the goal is reached, switch the vehicle to Hold (AUTO.LOITER) and stop "
+                        "once the HEARTBEAT shows it holding")
     p.add_argument("--signing-key-file", metavar="FILE",
                    help="MAVLink 2 signing: the 32-byte key as 64 hex digits in FILE (sign all, reject unsigned)")
     p.add_argument("--signing-key-env", metavar="NAME",
@@ -66,14 +68,13 @@ def run(args: argparse.Namespace) -> int:
         arm=args.arm or scenario.offboard.arm,
         takeoff_alt_m=scenario.offboard.takeoff_alt_m if args.takeoff_alt is None else args.takeoff_alt,
         reengage=args.reengage or scenario.offboard.reengage,
+        hold_after_goal_s=args.exit_after_goal,
     )
     companion = Companion(scenario, offboard=offboard)
 
     def stop(c: Companion) -> bool:
-        t_goal = c.state.goal_reached_t_s
-        if args.exit_after_goal is not None and t_goal is not None and c.records:
-            return c.records[-1].t_link_s - t_goal >= args.exit_after_goal
-        return c.sequencer.phase.name == "GAVE_UP"
+        """Once the vehicle holds after --exit-after-goal (the sequencer hands it back), or on giving up."""
+        return c.sequencer.phase.name in ("HELD", "GAVE_UP")
 
     try:
         signing_key = load_signing_key(args.signing_key_file, args.signing_key_env)
@@ -90,6 +91,8 @@ def run(args: argparse.Namespace) -> int:
     report = companion_report(companion)
     for key in ("events", "failsafe_events"):  # seconds since the start of this run, not epoch
         report[key] = [(round(t - started, 2), text) for t, text in report[key]]
+    if report.get("goal_reached_companion_t_s") is not None:
+        report["goal_reached_companion_t_s"] = round(report["goal_reached_companion_t_s"] - started, 2)
     if stats is not None:
         report["ticks"], report["late_ticks"] = stats.ticks, stats.late_ticks
     report["signing"] = signing_key is not None

@@ -142,6 +142,10 @@ class LoopConfig:
         companion filter's covariance; ``"predicted"`` uses its open-loop prediction.
     drone_cov_floor_m2 : isotropic floor added to the drone's planning covariance, m^2.
 
+    setpoint_kind : ``"velocity"`` (default) streams the plan's velocity commands;
+        ``"position_velocity"`` streams the plan's position with its velocity as feed-forward
+        while tracking a plan (PX4's position loop removes the slow tail of its velocity response).
+
     OFFBOARD engagement is the ``[offboard]`` table (:class:`companion.mavlink.offboard.OffboardConfig`).
     """
 
@@ -150,6 +154,7 @@ class LoopConfig:
     obstacle_radius_m: float = 0.5
     drone_covariance: str = "reported"
     drone_cov_floor_m2: float = 0.0
+    setpoint_kind: str = "velocity"
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -158,6 +163,7 @@ class LoopConfig:
         set_("obstacle_radius_m", check.number("obstacle_radius_m", self.obstacle_radius_m, lo=0.0, hi=100.0))
         check.choice("drone_covariance", self.drone_covariance, ("reported", "estimate", "predicted"))
         set_("drone_cov_floor_m2", check.number("drone_cov_floor_m2", self.drone_cov_floor_m2, lo=0.0, hi=100.0))
+        check.choice("setpoint_kind", self.setpoint_kind, ("velocity", "position_velocity"))
 
 
 @dataclass(frozen=True)

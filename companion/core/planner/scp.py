@@ -42,7 +42,7 @@ from companion.core.planner.qp_layout import QpLayout
 from companion.core.planner.request import Plan, PlanRequest
 from companion.core.planner.safety import (RECHECK_TOL_M, RECHECK_TOL_SIGMA, SafetyFigures, bhattacharyya_margin,
                                       exact_safety)
-from companion.core.planner.vehicle_model import LagModel
+from companion.core.planner.vehicle_model import model_from_config
 
 logger = logging.getLogger(__name__)
 
@@ -136,7 +136,7 @@ class Planner:
         self.config = config
         self.r_min = float(overlap.touch_radius(config.c_min, 3))
         self.r_max = None if config.c_max is None else float(overlap.touch_radius(config.c_max, 3))
-        self.lag = LagModel.from_time_constant(config.step_s, config.velocity_time_constant_s)
+        self.lag = model_from_config(config.step_s, config.velocity_time_constant_s, config.vehicle_response)
         self._qps: dict[tuple[int, int, int], tuple[QpLayout, OsqpQp | None]] = {}
         self._last_y: dict[tuple[int, int, int], np.ndarray] = {}
 
