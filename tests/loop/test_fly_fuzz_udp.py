@@ -106,7 +106,7 @@ def test_that_companion_fly_survives_garbage_and_absurd_obstacles_over_udp(tmp_p
     assert "Traceback" not in err, err[-3000:]
     report = json.loads(out)
     assert sent[0] > 1000
-    assert report["engaged"] is True, report["events"]
+    assert any("ENGAGED" in text for _, text in report["events"]), report["events"]  # (handed back in Hold after the goal)
     assert report["goal_reached_companion_t_s"] is not None, report["events"]
     assert report["obstacle_reports_rejected"] > 100           # the absurd reports were refused...
     assert report["tracks"] <= 1                               # ...so only the scenario's obstacle is tracked
