@@ -12,7 +12,7 @@ import time
 from importlib import resources
 from pathlib import Path
 
-from companion.commands._argtypes import integer_at_least
+from companion.commands._argtypes import integer_at_least, positive_number, seed
 from companion.errors import ConfigError
 from companion.offline.crowd import MAX_SYSTEMS
 from companion.offline.report import format_report, truth_report
@@ -47,13 +47,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("scenario", nargs="?", default="antipodal", help=f"{' | '.join(SCENARIOS)} or a scenario .toml")
-    p.add_argument("--seed", type=int, default=0, help="simulator noise seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="simulator noise seed (default 0)")
     p.add_argument("--formulation", default=None, help="planner formulation (hyperplane, paper, deterministic, bhattacharyya)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--out", default=None, metavar="DIR", help="keep the tlogs, the ground-truth summary and the figures here")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--realtime", action="store_true", help="two processes over loopback UDP in real time")
-    p.add_argument("--speed", type=float, default=1.0, help="with --realtime: simulated seconds per wall second of mavsim (default 1)")
+    p.add_argument("--speed", type=positive_number, default=1.0, help="with --realtime: simulated seconds per wall second of mavsim (default 1)")
+    p.add_argument("--signing-key-file", metavar="FILE", help="with --realtime: both programs sign with the key in FILE")
+    p.add_argument("--signing-key-env", metavar="NAME",
+                   help="with --realtime: both programs sign with the key in environment variable NAME")
     p.add_argument("--crowd", type=integer_at_least(0), default=0, metavar="N",
                    help=f"with --realtime: N extra stationary systems (at most {MAX_SYSTEMS}) report from 4-9 m beside the route")
     p.set_defaults(func=run)
@@ -72,6 +75,11 @@ def run(args: argparse.Namespace) -> int:
         overrides["formulation"] = args.formulation
     if args.no_c_max:
         overrides["c_max"] = None
+    from companion.offline.scenario_file import load_both  # imports mavsim: only the offline tools do
+
+    load_both(scenario, **overrides)  # both programs' sections, before anything starts
+    if not args.realtime and (args.signing_key_file or args.signing_key_env):
+        raise ConfigError("signing is for the UDP links of --realtime; the lockstep demo has none")
     out = Path(args.out) if args.out else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -169,6 +177,10 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
         fly_cmd += ["--formulation", overrides["formulation"]]
     if "c_max" in overrides:
         fly_cmd += ["--no-c-max"]
+    for flag, value in (("--signing-key-file", args.signing_key_file), ("--signing-key-env", args.signing_key_env)):
+        if value is not None:  # the key itself never appears on a command line
+            sim_cmd += [flag, value]
+            fly_cmd += [flag, value]
     # fly first: mavsim's clock starts when it does, and a companion still importing would
     # find the scenario's obstacles already on their way.
     fly = subprocess.Popen(fly_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

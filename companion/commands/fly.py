@@ -3,20 +3,21 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
-import math
 import sys
 import time
 
-from companion.commands._argtypes import positive_seconds
-from companion.errors import CompanionError
+from companion.commands._argtypes import non_negative_seconds, output_file, positive_number, positive_seconds
+from companion.errors import CompanionError, ConfigError
 from companion.loop.app import Companion
-from companion.loop.config import load_scenario
 from companion.loop.realtime import PlanWorker, run_realtime
 from companion.mavlink.link import DEFAULT_URL, open_link
 from companion.mavlink.tlog import TlogWriter
 from companion.offline.report import companion_report, format_report
+from companion.offline.scenario_file import load_both
+from companion.mavlink.signing import SigningKeyError, load_signing_key
 
 logger = logging.getLogger(__name__)
 
@@ -37,24 +38,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--connect", default=DEFAULT_URL, help=f"pymavlink connection string (default {DEFAULT_URL})")
     p.add_argument("--scenario", required=True, help="scenario TOML (mission, planner, estimator, map)")
     p.add_argument("--arm", action="store_true", help="arm the vehicle if it is disarmed")
-    p.add_argument("--takeoff-alt", type=float, default=None, metavar="M", help="take off to M metres above home first")
+    p.add_argument("--takeoff-alt", type=positive_number, default=None, metavar="M", help="take off to M metres above home first")
     p.add_argument("--reengage", action="store_true", help="re-request OFFBOARD after the pilot took over (default: never)")
     p.add_argument("--formulation", default=None, help="planner formulation (overrides the scenario)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
-    p.add_argument("--tlog", default=None, help="record the link to this tlog")
-    p.add_argument("--duration", type=_finite_seconds, default=None, metavar="S", help="stop after S wall seconds")
-    p.add_argument("--exit-after-goal", type=_finite_seconds, default=None, metavar="S",
+    p.add_argument("--tlog", type=output_file, default=None, help="record the link to this tlog")
+    p.add_argument("--duration", type=positive_seconds, default=None, metavar="S", help="stop after S wall seconds")
+    p.add_argument("--exit-after-goal", type=non_negative_seconds, default=None, metavar="S",
                    help="S seconds after the goal is reached, switch the vehicle to Hold (AUTO.LOITER) and stop "
                         "once the HEARTBEAT shows it holding")
+    p.add_argument("--signing-key-file", metavar="FILE",
+                   help="MAVLink 2 signing: the 32-byte key as 64 hex digits in FILE (sign all, reject unsigned)")
+    p.add_argument("--signing-key-env", metavar="NAME",
+                   help="MAVLink 2 signing: the key (64 hex digits) in environment variable NAME")
     p.add_argument("--json", action="store_true", help="print the run report as JSON")
     p.set_defaults(func=run)
-
-
-def _finite_seconds(text: str) -> float:
-    value = positive_seconds(text)
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite seconds, got {text}")
-    return value
 
 
 def microsecond_clock() -> float:
@@ -67,11 +65,18 @@ def run(args: argparse.Namespace) -> int:
     overrides: dict = {"formulation": args.formulation} if args.formulation else {}
     if args.no_c_max:
         overrides["c_max"] = None
-    scenario = load_scenario(args.scenario, **overrides)
-    offboard = scenario.loop.offboard_config(
-        arm=args.arm, takeoff_alt_m=args.takeoff_alt, reengage=args.reengage or scenario.loop.reengage,
+    scenario, _ = load_both(args.scenario, **overrides)  # mavsim's sections too: never accept what mavsim rejects
+    offboard = dataclasses.replace(
+        scenario.offboard,
+        arm=args.arm or scenario.offboard.arm,
+        takeoff_alt_m=scenario.offboard.takeoff_alt_m if args.takeoff_alt is None else args.takeoff_alt,
+        reengage=args.reengage or scenario.offboard.reengage,
         hold_after_goal_s=args.exit_after_goal,
     )
+    try:
+        signing_key = load_signing_key(args.signing_key_file, args.signing_key_env)
+    except SigningKeyError as exc:
+        raise ConfigError(str(exc)) from None
     worker = PlanWorker(scenario.planner)  # a planning process beside the setpoint stream
     if not worker.wait_ready(_PLANNER_START_S):
         worker.close()
@@ -85,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     tlog = None
     try:
         tlog = TlogWriter(args.tlog) if args.tlog else None  # the stream writes it, in handling order
-        link = open_link(args.connect, clock=microsecond_clock)
+        link = open_link(args.connect, clock=microsecond_clock, signing_key=signing_key)
     except BaseException:
         worker.close()
         if tlog is not None:
@@ -114,6 +119,8 @@ def run(args: argparse.Namespace) -> int:
         "solved": worker.stats.solved, "superseded": worker.stats.superseded, "errors": worker.stats.errors,
         "max_solve_ms": round(worker.stats.max_solve_s * 1e3, 1),
     }
+    report["signing"] = signing_key is not None
+    report["signature_rejected"] = link.stats.signature_rejected
     if args.json:
         print(json.dumps(report, indent=2, default=str))
     else:

@@ -59,7 +59,7 @@ class Companion:
     scenario : CompanionScenario
         Mission, planner, estimator, map and loop settings (``companion.loop.config``).
     offboard : OffboardConfig, optional
-        Engagement settings of the default sequencer (arming and takeoff are off unless asked for).
+        Engagement settings of the default sequencer (default: the scenario's ``[offboard]`` table).
     sequencer : OffboardSequence, optional
         The engagement state machine (default: an
         :class:`~companion.mavlink.offboard.OffboardSequencer` with ``offboard``).
@@ -80,7 +80,7 @@ class Companion:
         self.cfg = scenario.planner
         self.loop = scenario.loop
         self.planning: PlanningService = planning or InlinePlanning(Planner(scenario.planner))
-        self.sequencer: OffboardSequence = sequencer or OffboardSequencer(offboard or scenario.loop.offboard_config())
+        self.sequencer: OffboardSequence = sequencer or OffboardSequencer(offboard or scenario.offboard)
         self.perception = Perception(scenario)
         self.builder = RequestBuilder(scenario)
         self.executor = Executor(scenario.planner, 1.0 / scenario.loop.setpoint_rate_hz, self.planner.lag,

@@ -35,7 +35,7 @@ Time base
 ---------
 The companion runs on *link time*: Unix time on a real link, simulated time in lockstep.
 A lockstep tlog is stamped ``LOCKSTEP_EPOCH_S + simulated time``
-(:data:`companion.mavlink.tlog.LOCKSTEP_EPOCH_S`, see :class:`~companion.mavlink.link.MemoryLink`), so
+(:data:`companion.offline.harness.LOCKSTEP_EPOCH_S`, see :class:`~companion.mavlink.link.MemoryLink`), so
 the replay subtracts that offset. ``time_offset_s=None`` detects it: a log whose first
 stamp lies within one day after ``LOCKSTEP_EPOCH_S`` (2024-01-01) is a lockstep log;
 otherwise the offset is 0 (pass ``time_offset_s`` to override). Times are handled in
@@ -78,7 +78,8 @@ from companion.errors import CompanionError
 from companion.mavlink.link import DEFAULT_SOURCE_COMPONENT, DEFAULT_SOURCE_SYSTEM, Received
 from companion.mavlink.offboard import OffboardConfig
 from companion.loop.config import load_scenario
-from companion.mavlink.tlog import LOCKSTEP_EPOCH_S, read_tlog
+from companion.mavlink.tlog import read_tlog
+from companion.offline.harness import LOCKSTEP_EPOCH_S
 
 logger = logging.getLogger(__name__)
 

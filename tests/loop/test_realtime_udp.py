@@ -9,6 +9,7 @@ depend on the machine's load; see docs/REALTIME.md for figures).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 from companion.cli import main
@@ -31,7 +32,7 @@ def test_that_offboard_is_engaged_and_the_goal_reached_over_udp_and_the_log_repl
     assert summary["planner_process"]["solved"] >= summary["replans"]
     # Plans came back from the planning process some ticks after their requests; the log
     # says when, and the replay applies each at the same tick: every command reproduced.
-    offboard = load_scenario(SCENARIO).loop.offboard_config(hold_after_goal_s=1.0)  # demo --realtime: fly --exit-after-goal 1
+    offboard = dataclasses.replace(load_scenario(SCENARIO).offboard, hold_after_goal_s=1.0)  # demo --realtime: fly --exit-after-goal 1
     res = replay(tmp_path / "companion.tlog", SCENARIO, offboard=offboard)
     assert res.mode == "compare"
     assert any("announced" in note for note in res.notes)
