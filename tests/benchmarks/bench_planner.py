@@ -180,7 +180,7 @@ def run() -> list[dict]:
     cvx_times, cvx_its = [], []
     for requests, scene_plans in hyper_runs:
         for k in range(1, len(requests), CVXPY_EVERY):
-            v_init = planner._initial_velocities(requests[k], requests[k].velocity, scene_plans[k - 1])
+            v_init = planner.initial_velocities(requests[k], requests[k].velocity, scene_plans[k - 1])
             t0 = time.perf_counter()
             _, it = cvxpy_hyperplane(cfg, requests[k], v_init)
             cvx_times.append(time.perf_counter() - t0)

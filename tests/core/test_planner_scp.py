@@ -114,9 +114,9 @@ def test_that_a_warm_started_replan_reuses_the_solver_and_agrees():
     cfg, req = scenario_one()
     planner = Planner(cfg)
     first = planner.solve(req)
-    qp = planner._qps[(20, 1, 0)][1]
+    qp = planner.solver((20, 1, 0))
     again = planner.solve(req, warm_start=first)
-    assert planner._qps[(20, 1, 0)][1] is qp              # set up once per shape, updated in place
+    assert qp is not None and planner.solver((20, 1, 0)) is qp   # set up once per shape, updated in place
     assert again.status == "optimal"
     assert np.linalg.norm(again.positions[-1] - GOAL) <= 0.1
 

@@ -85,15 +85,3 @@ def exact_safety(request: PlanRequest, positions: np.ndarray, drone_radius_m: fl
         distance_margin=distance,
         lam=lam,
     )
-
-
-def bhattacharyya_margin(request: PlanRequest, positions: np.ndarray, drone_radius_m: float, d_min: float) -> np.ndarray:
-    """Radius-aware Bhattacharyya distance minus ``d_min`` per obstacle and step (P, N)."""
-    from companion.core.planner.formulations import signed_bhattacharyya
-
-    P, N = request.num_obstacles, request.horizon_steps
-    if not P:
-        return np.zeros((0, N))
-    value, _ = signed_bhattacharyya(positions, request.drone_covs, request.obstacle_means, request.obstacle_covs,
-                                    request.obstacle_radii + drone_radius_m)
-    return value - d_min
