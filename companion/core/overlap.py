@@ -309,45 +309,10 @@ def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...]) -
 
     # Start at the geometric mean of the generalised eigenvalues of (S2, S1): exact when S2 = g S1.
     u = 0.5 * (np.log(K.det(S2)) - np.log(K.det(S1))) / d
-    lo = np.full(n, -np.inf)
-    hi = np.full(n, np.inf)
-    idx = np.arange(n)  # pairs still iterating
-    S1a, S2a, da = S1, S2, dv
-    for _ in range(_MAX_NEWTON):
-        ua = u[idx]
-        t = np.exp(ua)
-        a_inv = K.inv_sym(K.axpy(t, S1a, S2a))
-        x = K.mv(a_inv, da)
-        y = K.mv(S1a, x)
-        q1 = K.dot(x, y)
-        q2 = K.dot(x, K.mv(S2a, x))
-        w = K.dot(y, K.mv(a_inv, y))
-        v = q1 - t * w
-        phi = 2.0 * ua + np.log(q1) - np.log(q2)  # log(eta1^2 / eta2^2), increasing in u
-        dphi = 2.0 - 2.0 * t * w / q1 + 2.0 * t * v / q2
-        la = np.where(phi < 0.0, np.maximum(lo[idx], ua), lo[idx])
-        ha = np.where(phi > 0.0, np.minimum(hi[idx], ua), hi[idx])
-        lo[idx], hi[idx] = la, ha
-        step = -phi / dphi
-        new_u = ua + step
-        # Safeguard: stay inside the bracket the signs have shown; bisect where Newton leaves it.
-        both = np.isfinite(la) & np.isfinite(ha)
-        # A bracket end can sit within rounding of the root (phi ~ 1e-16 there); a Newton step
-        # that lands just beyond it is still good, so only a clear exit counts as leaving.
-        slack = 1e-12 * (1.0 + np.abs(ua))
-        outside = (new_u < la - slack) | (new_u > ha + slack)
-        midpoint = 0.5 * (np.where(both, la, 0.0) + np.where(both, ha, 0.0))
-        new_u = np.where(outside & both, midpoint, new_u)
-        new_u = np.where(~both, ua + np.clip(step, -4.0, 4.0), new_u)  # no two-sided bracket yet: cap every step
-        u[idx] = new_u
-        keep = np.abs(new_u - ua) > _U_TOL * np.maximum(1.0, np.abs(ua))
-        if not np.any(keep):
-            break
-        if not np.all(keep):
-            idx = idx[keep]
-            S1a, S2a, da = K.take(S1a, keep), K.take(S2a, keep), K.take(da, keep)
-    else:  # pragma: no cover - the iteration is proven to converge; keep a trace if it ever does not
-        logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", _MAX_NEWTON, idx.size)
+    if d == 3 and isinstance(S1, np.ndarray):
+        u = _newton_polynomial(S1, S2, np.asarray(dv), u)
+    else:
+        u = _newton_direct(S1, S2, dv, u)
 
     t = np.exp(u)
     lam = t / (1.0 + t)
@@ -392,6 +357,99 @@ def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...]) -
     )
 
 
+def _safeguarded_step(u: Array, phi: Array, dphi: Array, lo: Array, hi: Array) -> tuple[Array, Array, Array]:
+    """One safeguarded Newton step on ``phi(u) = 0``: returns the new ``u`` and the updated bracket."""
+    lo = np.where(phi < 0.0, np.maximum(lo, u), lo)
+    hi = np.where(phi > 0.0, np.minimum(hi, u), hi)
+    step = -phi / dphi
+    new_u = u + step
+    # Safeguard: stay inside the bracket the signs have shown; bisect where Newton leaves it.
+    both = np.isfinite(lo) & np.isfinite(hi)
+    # A bracket end can sit within rounding of the root (phi ~ 1e-16 there); a Newton step
+    # that lands just beyond it is still good, so only a clear exit counts as leaving.
+    slack = 1e-12 * (1.0 + np.abs(u))
+    outside = (new_u < lo - slack) | (new_u > hi + slack)
+    midpoint = 0.5 * (np.where(both, lo, 0.0) + np.where(both, hi, 0.0))
+    new_u = np.where(outside & both, midpoint, new_u)
+    new_u = np.where(~both, u + np.clip(step, -4.0, 4.0), new_u)  # no two-sided bracket yet: cap every step
+    return new_u, lo, hi
+
+
+def _newton_polynomial(S1: Array, S2: Array, delta: Array, u: Array) -> Array:
+    """``u = log t`` solving ``phi(u) = 0`` for 3x3 pairs, with ``A(t)^-1 delta`` as a polynomial in ``t``.
+
+    ``adj(t S1 + S2) = t^2 adj(S1) + t M + adj(S2)`` with ``M = adj(S1 + S2) - adj(S1) - adj(S2)``,
+    so ``x`` is parallel to ``v(t) = t^2 a2 + t a1 + a0`` (``a2 = adj(S1) delta``, ...) and
+    ``phi(u) = 2u + log(v'S1v) - log(v'S2v)`` (the determinant cancels);
+    ``phi'(u) = 2 + 2t (v_t'S1v / v'S1v - v_t'S2v / v'S2v)``. Three matrix-vector
+    products per pair are computed once; each Newton step is a few whole-array operations.
+    All three adjugate terms are positive semidefinite, so ``v`` loses no precision to
+    cancellation beyond the covariances' condition number.
+    """
+    adj1, adj2 = K.adjugate3(S1), K.adjugate3(S2)
+    mixed = K.adjugate3(S1 + S2) - adj1 - adj2
+    a2, a1, a0 = K.matvec(adj1, delta), K.matvec(mixed, delta), K.matvec(adj2, delta)
+    n = u.shape[0]
+    lo = np.full(n, -np.inf)
+    hi = np.full(n, np.inf)
+    idx = None  # all pairs iterate until the first converge, then only the rest
+    for _ in range(_MAX_NEWTON):
+        ua = u if idx is None else u[idx]
+        t = np.exp(ua)
+        v = (a2 * t + a1) * t + a0
+        vt = (2.0 * t) * a2 + a1
+        s1v, s2v = K.matvec(S1, v), K.matvec(S2, v)
+        n1, n2 = K.dots(v, s1v), K.dots(v, s2v)
+        phi = 2.0 * ua + np.log(n1 / n2)
+        dphi = 2.0 + 2.0 * t * (K.dots(vt, s1v) / n1 - K.dots(vt, s2v) / n2)
+        la, ha = (lo, hi) if idx is None else (lo[idx], hi[idx])
+        new_u, la, ha = _safeguarded_step(ua, phi, dphi, la, ha)
+        keep = np.abs(new_u - ua) > _U_TOL * np.maximum(1.0, np.abs(ua))
+        if idx is None:
+            u, lo, hi = new_u, la, ha
+        else:
+            u[idx], lo[idx], hi[idx] = new_u, la, ha
+        if not np.any(keep):
+            return u
+        if not np.all(keep):
+            idx = np.flatnonzero(keep) if idx is None else idx[keep]
+            S1, S2, a2, a1, a0 = S1[:, :, keep], S2[:, :, keep], a2[:, keep], a1[:, keep], a0[:, keep]
+    logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", _MAX_NEWTON, n if idx is None else idx.size)
+    return u
+
+
+def _newton_direct(S1, S2, dv, u: Array) -> Array:
+    """``u = log t`` solving ``phi(u) = 0`` for any dimension, solving ``A(t) x = delta`` at each step."""
+    n = u.shape[0]
+    u = u.copy()
+    lo = np.full(n, -np.inf)
+    hi = np.full(n, np.inf)
+    idx = np.arange(n)  # pairs still iterating
+    S1a, S2a, da = S1, S2, dv
+    for _ in range(_MAX_NEWTON):
+        ua = u[idx]
+        t = np.exp(ua)
+        a_inv = K.inv_sym(K.axpy(t, S1a, S2a))
+        x = K.mv(a_inv, da)
+        y = K.mv(S1a, x)
+        q1 = K.dot(x, y)
+        q2 = K.dot(x, K.mv(S2a, x))
+        w = K.dot(y, K.mv(a_inv, y))
+        v = q1 - t * w
+        phi = 2.0 * ua + np.log(q1) - np.log(q2)  # log(eta1^2 / eta2^2), increasing in u
+        dphi = 2.0 - 2.0 * t * w / q1 + 2.0 * t * v / q2
+        new_u, lo[idx], hi[idx] = _safeguarded_step(ua, phi, dphi, lo[idx], hi[idx])
+        u[idx] = new_u
+        keep = np.abs(new_u - ua) > _U_TOL * np.maximum(1.0, np.abs(ua))
+        if not np.any(keep):
+            return u
+        if not np.all(keep):
+            idx = idx[keep]
+            S1a, S2a, da = K.take(S1a, keep), K.take(S2a, keep), K.take(da, keep)
+    logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", _MAX_NEWTON, idx.size)
+    return u
+
+
 def support_margin(
     mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike, normal: ArrayLike, radius_sum: ArrayLike = 0.0
 ) -> Array:
@@ -422,12 +480,18 @@ def _broadcast_means(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: Arra
     return np.broadcast_to(m1, lead + m1.shape[-1:]), cov1, mu2, cov2
 
 
-def _support_margin(m1: Array, m2: Array, pairs: CovariancePairs, normal: Array, radius: Array) -> Array:
-    """:func:`support_margin` on validated components (means and normals (d, n), radii (n,))."""
-    n = normal / np.sqrt(K.dot(normal, normal))
-    s1 = np.sqrt(K.quad(n, pairs.s1))
-    s2 = np.sqrt(K.quad(n, pairs.s2))
-    return (K.dot(n, m2 - m1) - radius) / (s1 + s2)
+def _support_margin(m1: Array, m2: Array, pairs: CovariancePairs, normal: Array, radius: Array,
+                    spread: Array | None = None) -> Array:
+    """:func:`support_margin` on validated components (means and normals (d, n), radii (n,)).
+
+    ``spread``: ``s1 + s2`` along ``normal`` when the caller has it (then ``normal`` must
+    be unit already, as minmax's is); computed here otherwise.
+    """
+    n = normal
+    if spread is None:
+        n = normal / np.sqrt(K.dot(normal, normal))
+        spread = np.sqrt(K.quad(n, pairs.s1)) + np.sqrt(K.quad(n, pairs.s2))
+    return (K.dot(n, m2 - m1) - radius) / spread
 
 
 def contour_of_touch(
@@ -444,7 +508,8 @@ def contour_of_touch(
     lead, d = pairs.lead, pairs.dim
     res = _minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead)
     normal = K.vectors_to_components(res.normal)
-    margin = _support_margin(m1, m2, pairs, normal, np.broadcast_to(radius, lead).ravel()).reshape(lead)
+    margin = _support_margin(m1, m2, pairs, normal, np.broadcast_to(radius, lead).ravel(),
+                             (res.s1 + res.s2).ravel()).reshape(lead)
     return special.gammainc(d / 2.0, 0.5 * np.square(np.maximum(margin, 0.0)))
 
 

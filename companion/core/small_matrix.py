@@ -126,3 +126,30 @@ def take(m, keep: NDArray[np.bool_] | NDArray[np.intp]):
     if len(m) and isinstance(m[0], (list, tuple)) or (isinstance(m, np.ndarray) and m.ndim == 3):
         return [[c[keep] for c in row] for row in m]
     return [c[keep] for c in m]
+
+
+def adjugate3(m: Array) -> Array:
+    """Adjugates of a batch of symmetric 3x3 matrices given as a ``(3, 3, n)`` array (same layout)."""
+    a, b, c, dd, e, f = m[0, 0], m[0, 1], m[0, 2], m[1, 1], m[1, 2], m[2, 2]
+    c01, c02, c12 = c * e - b * f, b * e - c * dd, b * c - a * e
+    return np.array([[dd * f - e * e, c01, c02], [c01, a * f - c * c, c12], [c02, c12, a * dd - b * b]])
+
+
+def matvec(m: Array, v: Array) -> Array:
+    """``m v`` for a ``(d, d, n)`` matrix batch and a ``(d, n)`` vector batch, as one array ``(d, n)``.
+
+    Written as elementwise products and sums (not ``einsum``) so that every pair's result
+    is the same bits whatever the batch it is computed in.
+    """
+    out = m[:, 0] * v[0]
+    for j in range(1, v.shape[0]):
+        out += m[:, j] * v[j]
+    return out
+
+
+def dots(a: Array, b: Array) -> Array:
+    """Inner products of two ``(d, n)`` vector batches, ``(n,)`` (elementwise, batch-independent)."""
+    out = a[0] * b[0]
+    for j in range(1, a.shape[0]):
+        out += a[j] * b[j]
+    return out

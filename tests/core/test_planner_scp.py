@@ -6,6 +6,8 @@ Safety figures are recomputed here with the overlap module on the returned posit
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -94,11 +96,38 @@ def test_that_an_unavoidable_obstacle_is_never_reported_optimal():
     means = np.broadcast_to(START + np.array([0.3, 0.0, 0.0]), (1, n, 3))
     req = PlanRequest(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (n, 3, 3)), target=GOAL,
                       obstacle_means=means, obstacle_covs=np.broadcast_to(S, (1, n, 3, 3)), obstacle_radii=[0.5])
-    plan = Planner(cfg).solve(req)
+    plan = Planner(dataclasses.replace(cfg, replan_work_budget=10**6)).solve(req)   # budget not binding
     assert plan.status in ("slack", "failed")
     assert plan.status == "slack" and plan.slack_max > 0.1
     assert plan.contour_of_touch[0, 0] < 0.6
     assert np.all(np.isfinite(plan.velocities))
+    assert plan.work > cfg.replan_work_budget      # this least-violation path needs more than the default
+
+
+def test_that_a_replan_out_of_budget_returns_a_safe_iterate_or_fails_within_the_budget():
+    cfg, _ = scenario_one()
+    n = 20
+    means = np.broadcast_to(START + np.array([0.3, 0.0, 0.0]), (1, n, 3))
+    req = PlanRequest(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (n, 3, 3)), target=GOAL,
+                      obstacle_means=means, obstacle_covs=np.broadcast_to(S, (1, n, 3, 3)), obstacle_radii=[0.5])
+    for budget in (200, 1000, cfg.replan_work_budget):
+        plan = Planner(dataclasses.replace(cfg, replan_work_budget=budget)).solve(req)
+        assert plan.work <= budget
+        assert plan.status == "failed"                  # no safe iterate exists here: the loop brakes
+        assert any(n.startswith("work_budget") for n in plan.notes)
+
+
+def test_that_a_tight_budget_still_returns_a_safe_plan_when_the_start_is_safe():
+    cfg, req = scenario_one()
+    planner = Planner(cfg)
+    first = planner.solve(req)
+    assert first.status == "optimal" and first.work <= cfg.replan_work_budget and first.admm_iterations > 0
+    tight = Planner(dataclasses.replace(cfg, replan_work_budget=200))
+    tight.solve(req)
+    again = tight.solve(req, warm_start=first)          # 200 units: not even one QP fits
+    assert again.work <= 200
+    assert again.status == "optimal"                    # the shifted previous plan, rechecked exactly
+    assert np.all(again.contour_of_touch[again.in_range] >= cfg.c_min - 1e-3)
 
 
 def test_that_obstacles_beyond_sensing_range_are_ignored():

@@ -24,6 +24,9 @@ logger = logging.getLogger(__name__)
 #: the overlap of Gaussians; ``deterministic`` and ``bhattacharyya`` are baselines.
 FORMULATIONS: tuple[str, ...] = ("hyperplane", "paper", "deterministic", "bhattacharyya")
 
+#: Smallest ``replan_work_budget``: one QP solve plus a few dozen ADMM iterations.
+MIN_WORK_BUDGET = 200
+
 #: Spatial dimension of the planner (3-D NED); the overlap module also handles 2-D.
 DIM = 3
 
@@ -169,6 +172,15 @@ class PlannerConfig:
     solver_rho : float
         OSQP's initial ADMM step size, restored before every QP of the SCP (see
         :mod:`companion.core.planner.osqp_qp`).
+    replan_work_budget : int
+        Compute budget of one replan in work units, never wall time, so a replan's
+        result does not depend on the machine: one unit per ADMM iteration, summed over
+        every QP of the replan (hard, least-slack, capped and last-resort soft QPs), plus
+        :data:`companion.core.planner.budget.QP_SOLVE_WORK` units per QP solved (its
+        linearisation, update, factorisation and exact recheck, which grow with the SCP
+        iterations). When it runs out the planner returns its best safe iterate or fails
+        (status ``'failed'``: the loop brakes). The default keeps the largest replan of
+        the shipped scenes well under the 0.3 s replan period (docs/PLANNER_BUDGET.md).
     """
 
     formulation: str = "hyperplane"
@@ -198,6 +210,7 @@ class PlannerConfig:
     solver_polish: bool = False
     solver_max_iter: int = 2000
     solver_rho: float = 0.1
+    replan_work_budget: int = 8000
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -231,6 +244,7 @@ class PlannerConfig:
         set_("solver_eps_rel", _nonnegative("solver_eps_rel", self.solver_eps_rel))
         set_("solver_max_iter", _int_at_least("solver_max_iter", self.solver_max_iter, 1))
         set_("solver_rho", _positive("solver_rho", self.solver_rho))
+        set_("replan_work_budget", _int_at_least("replan_work_budget", self.replan_work_budget, MIN_WORK_BUDGET))
         if not isinstance(self.solver_polish, bool):
             raise ConfigError(f"solver_polish = {self.solver_polish!r} must be true or false")
 

@@ -94,10 +94,14 @@ def _unit_separation(p_bar: np.ndarray, means: np.ndarray) -> np.ndarray:
     return np.where(norm > _TINY_M, d / np.maximum(norm, _TINY_M), fallback)
 
 
+#: A drone iterate this close to an obstacle mean (metres) is nudged off it (:func:`_nudge`).
+_NUDGE_M = 1e-6
+
+
 def _nudge(p_bar: np.ndarray, means: np.ndarray) -> np.ndarray:
     """Drone iterate moved off any obstacle mean it coincides with (minmax needs a direction)."""
     d = means - p_bar[None]
-    close = np.linalg.norm(d, axis=-1) <= 1e-6
+    close = np.linalg.norm(d, axis=-1) <= _NUDGE_M
     if not np.any(close):
         return np.broadcast_to(p_bar[None], means.shape)
     out = np.broadcast_to(p_bar[None], means.shape).copy()
@@ -105,10 +109,14 @@ def _nudge(p_bar: np.ndarray, means: np.ndarray) -> np.ndarray:
     return out
 
 
-def hyperplane_rows(p_bar, drone_covs, means, covs, radius_sum, r_min, r_max):
-    """Rows of the ``hyperplane`` formulation; also returns the minmax result at the iterate."""
-    mu1 = _nudge(p_bar, means)
-    res = overlap.minmax(mu1, np.broadcast_to(drone_covs[None], covs.shape), means, covs)
+def hyperplane_rows(p_bar, drone_covs, means, covs, radius_sum, r_min, r_max, separator=None):
+    """Rows of the ``hyperplane`` formulation; also returns the minmax result at the iterate.
+
+    ``separator``: the minmax result at the (nudged) iterate if already computed.
+    """
+    if separator is None:
+        separator = overlap.minmax(_nudge(p_bar, means), np.broadcast_to(drone_covs[None], covs.shape), means, covs)
+    res = separator
     n, ssum = res.normal, res.s1 + res.s2
     n_o = np.einsum("pnk,pnk->pn", n, means)
     lower = (r_min + BACKOFF_SIGMA) * ssum + radius_sum[:, None] - n_o   # -n.p >= r_min(s1+s2) + R - n.o
@@ -270,6 +278,7 @@ class Formulation:
         self.wall_radius = self.r_min
         self.wall_row_radius = self.r_min + BACKOFF_SIGMA
         self.wall_row_backoff_m = 0.0
+        self._separator: tuple[PlanRequest, np.ndarray, overlap.MinmaxResult] | None = None
 
     def rows(self, request: PlanRequest, positions: np.ndarray, lam: np.ndarray | None) -> ObstacleRows:
         """Linearised obstacle rows around ``positions`` (N, 3) (and ``lam`` (P, N) if carried)."""
@@ -287,8 +296,28 @@ class Formulation:
 
     def recheck(self, request: PlanRequest, positions: np.ndarray, in_range: np.ndarray) -> tuple[SafetyFigures, bool]:
         """Exact figures of ``positions`` and whether this formulation's own constraints hold on them."""
-        figs = exact_safety(request, positions, self.drone_radius_m, self.wall_radius)
+        figs = self._exact(request, positions)
         return figs, self._walls_hold(figs) and bool(np.all(figs.eta[in_range] >= self.r_min - RECHECK_TOL_SIGMA))
+
+    def separator(self, request: PlanRequest, positions: np.ndarray) -> overlap.MinmaxResult:
+        """Minmax of the drone at ``positions`` (N, 3) against every obstacle (P, N), nudged off coincident means.
+
+        The last result is kept: the SCP's exact recheck of an iterate and the next
+        linearisation around it ask for the same one.
+        """
+        mu1 = _nudge(positions, request.obstacle_means)
+        cached = self._separator
+        if cached is not None and cached[0] is request and np.array_equal(cached[1], mu1):
+            return cached[2]
+        res = request.covariance_pairs.minmax(mu1, request.obstacle_means)
+        self._separator = (request, np.array(mu1), res)
+        return res
+
+    def _exact(self, request: PlanRequest, positions: np.ndarray) -> SafetyFigures:
+        nudged = request.num_obstacles and bool(np.any(
+            np.linalg.norm(request.obstacle_means - positions[None], axis=-1) <= _NUDGE_M))
+        separator = None if nudged or not request.num_obstacles else self.separator(request, positions)
+        return exact_safety(request, positions, self.drone_radius_m, self.wall_radius, separator)
 
     @staticmethod
     def _walls_hold(figs: SafetyFigures) -> bool:
@@ -306,7 +335,7 @@ class Hyperplane(Formulation):
 
     def rows(self, request, positions, lam=None):
         rows, _ = hyperplane_rows(positions, request.drone_covs, request.obstacle_means, request.obstacle_covs,
-                                  self._radius_sum(request), self.r_min, self.r_max)
+                                  self._radius_sum(request), self.r_min, self.r_max, self.separator(request, positions))
         return rows
 
 
@@ -324,10 +353,7 @@ class Paper(Formulation):
     def initial_lam(self, request, positions):
         if request.num_obstacles == 0:
             return np.zeros((0, request.horizon_steps))
-        mu1 = _nudge(positions, request.obstacle_means)
-        res = overlap.minmax(mu1, np.broadcast_to(request.drone_covs[None], request.obstacle_covs.shape),
-                             request.obstacle_means, request.obstacle_covs)
-        return np.clip(res.lam, LAM_EPS, 1.0 - LAM_EPS)
+        return np.clip(self.separator(request, positions).lam, LAM_EPS, 1.0 - LAM_EPS)
 
 
 class Deterministic(Formulation):
@@ -345,7 +371,7 @@ class Deterministic(Formulation):
         return deterministic_rows(positions, request.obstacle_means, self._radius_sum(request))
 
     def recheck(self, request, positions, in_range):
-        figs = exact_safety(request, positions, self.drone_radius_m, self.wall_radius)
+        figs = self._exact(request, positions)
         return figs, self._walls_hold(figs) and bool(np.all(figs.distance_margin[in_range] >= -RECHECK_TOL_M))
 
 
@@ -359,7 +385,7 @@ class Bhattacharyya(Formulation):
                                   self._radius_sum(request), self.r_min)
 
     def recheck(self, request, positions, in_range):
-        figs = exact_safety(request, positions, self.drone_radius_m, self.wall_radius)
+        figs = self._exact(request, positions)
         ok = self._walls_hold(figs)
         if request.num_obstacles:
             value, _ = signed_bhattacharyya(positions, request.drone_covs, request.obstacle_means,

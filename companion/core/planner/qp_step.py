@@ -14,9 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.core.planner.budget import WorkBudget
 from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import LAM_EPS, Formulation, ObstacleRows, relax_out_of_range
-from companion.core.planner.osqp_qp import OsqpQp, QpSolution
+from companion.core.planner.osqp_qp import MAX_ITER, OsqpQp, QpSolution
 from companion.core.planner.qp_data import RequestData
 from companion.core.planner.qp_layout import QpLayout
 
@@ -52,6 +53,7 @@ class QpStep:
     solution : the raw OSQP result (of the QP whose solution this is).
     admm_iterations : ADMM iterations of every QP solved for this step (hard, and the
         least-violation QPs when the hard one failed).
+    least_violation : whether the solution came from the least-violation QPs.
     """
 
     velocities: np.ndarray
@@ -71,6 +73,7 @@ class QpStep:
     v0: np.ndarray
     solution: QpSolution
     admm_iterations: int = 0
+    least_violation: bool = False
 
 
 class QpWorkspace:
@@ -108,8 +111,15 @@ def linearise(formulation: Formulation, data: RequestData, positions: np.ndarray
 
 
 def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data: RequestData, v_bar: np.ndarray,
-             p_bar: np.ndarray, lam_bar: np.ndarray | None, *, first: bool) -> QpStep:
-    """Linearise at ``(v_bar, p_bar, lam_bar)``, write the QP into ``ws``, solve it (hard, else least violation)."""
+             p_bar: np.ndarray, lam_bar: np.ndarray | None, budget: WorkBudget, *, first: bool,
+             try_hard: bool = True) -> QpStep | None:
+    """Linearise at ``(v_bar, p_bar, lam_bar)``, write the QP into ``ws``, solve it (hard, else least violation).
+
+    ``try_hard=False`` goes straight to the least-violation QPs (the SCP does so once the
+    hard QP of this replan proved infeasible: an infeasible hard QP runs to its iteration
+    cap, and the least-violation pair finds the hard solution anyway when one exists).
+    Returns None when ``budget`` ran out before a solution (``budget.exhausted`` is then set).
+    """
     layout = ws.layout
     N, P = layout.N, layout.P
     if lam_bar is not None:
@@ -167,13 +177,20 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
         # duals of the previous replan shifted by one step like the primal; a cold start
         # starts them at zero, so that its plan does not depend on what was solved before
         qp.warm_start(x=x0, y=data.y_warm if data.y_warm is not None else np.zeros(layout.m))
-    sol = qp.solve(max_iter=cfg.solver_max_iter)
-    admm = sol.iterations
-    if not sol.accurate:
-        hard_status = sol.status
-        sol, extra = least_violation(cfg, ws, data, x0)
-        admm += extra
+    admm_before = budget.admm_iterations
+    sol = None
+    if try_hard:
+        sol = budget.solve(qp, cfg.solver_max_iter)
+        if sol is None or budget.exhausted:
+            return None
+    least = sol is None or not sol.accurate
+    if least:
+        hard_status = "skipped" if sol is None else sol.status
+        sol = least_violation(cfg, ws, data, x0, budget)
+        if sol is None:
+            return None
         logger.debug("hard QP %s; soft QP %s", hard_status, sol.status)
+    admm = budget.admm_iterations - admm_before
     x = sol.x
     # cost at the solution with slacks clipped at 0: OSQP meets "s >= 0" only to its
     # tolerance, and a slightly negative slack times the large penalty would bias J
@@ -193,11 +210,12 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
         slack_wall=sig * x[col["s_wall"].slice].reshape(layout.W, N),
         objective=objective, cost=objective - penalty, rows=rows,
         velocity_lower=v_lo, velocity_upper=v_hi, lam_lower=lam_lo, lam_upper=lam_hi,
-        wall_upper=data.wall_upper, v0=data.v0, solution=sol, admm_iterations=admm,
+        wall_upper=data.wall_upper, v0=data.v0, solution=sol, admm_iterations=admm, least_violation=least,
     )
 
 
-def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: np.ndarray) -> tuple[QpSolution, int]:
+def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: np.ndarray,
+                    budget: WorkBudget) -> QpSolution | None:
     """The QP when its safety rows cannot all hold: violate them as little as possible.
 
     An L1 penalty is exact only above the constraint's multiplier, and here the
@@ -210,7 +228,7 @@ def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: 
     the QP is strongly convex in the velocities; (2) the real cost with each safety
     slack capped at what (1) needed.
 
-    Returns the solution and the ADMM iterations of the QPs solved here.
+    Every QP is solved within ``budget``; returns None when it ran out first.
     """
     layout, qp, l, u = ws.layout, ws.qp, ws.l, ws.u
     slack_rows = layout.row["slack"]
@@ -225,23 +243,25 @@ def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: 
     # The duals of an infeasible or unconverged hard solve are no start (they made OSQP
     # hit its iteration cap in closed loop with `paper`, measured): restart them at zero.
     qp.warm_start(x=x0, y=np.zeros(layout.m))
-    least = qp.solve(max_iter=cfg.solver_max_iter)
-    admm = least.iterations
+    least = budget.solve(qp, cfg.solver_max_iter)
     qp.update(p_data=data.p_data, q=data.q)
+    if least is None or budget.exhausted:
+        return None
     if np.all(np.isfinite(least.x)):     # an unconverged (1) still bounds the slack it needs
         needed = np.maximum(least.x[layout.slack_cols[layout.safety_slacks]], 0.0)
         cap = np.where(needed > SLACK_TOL, needed + LEAST_VIOLATION_MARGIN, 0.0)   # unneeded: pinned
         u[safety] = cap / layout.slack_scale
         qp.update(l=l, u=u)
         qp.warm_start(x=least.x, y=np.zeros(layout.m))
-        sol = qp.solve(max_iter=cfg.solver_max_iter)
-        admm += sol.iterations
+        sol = budget.solve(qp, cfg.solver_max_iter)
+        if sol is None or budget.exhausted:
+            return None
         if sol.usable:
-            return sol, admm
+            return sol
         if least.usable:     # (1) is a plan too: least violation, cost not minimised
-            return least, admm
+            return least
     u[slack_rows.slice] = np.inf
     qp.update(l=l, u=u)
     qp.warm_start(x=x0, y=np.zeros(layout.m))
-    sol = qp.solve()                     # the plain soft QP: a plan, and its slack says so
-    return sol, admm + sol.iterations
+    sol = budget.solve(qp, MAX_ITER)     # the plain soft QP: a plan, and its slack says so
+    return None if sol is None or budget.exhausted else sol

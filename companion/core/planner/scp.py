@@ -20,8 +20,12 @@ Cost (``0.5 x'Px + q'x + const``)::
 Positions obey the paper's holonomic model ``p_i = p_{i-1} + tau V_i``, or with a velocity
 lag ``p_i = p_{i-1} + b V_i + c V_{i-1}`` (:mod:`companion.core.planner.vehicle_model`).
 
-The only clock is ``time.perf_counter()``, read for the ``solve_time_s`` diagnostic; it
-never influences the plan (no time limit is handed to the solver).
+Every replan runs within ``replan_work_budget`` work units (ADMM iterations of all its
+QPs plus a fixed charge per QP, :mod:`companion.core.planner.budget`); when they run
+out the plan is the best safe iterate (the last QP's solution, else the SCP's start,
+whichever passes the exact recheck) or ``failed``. The only clock is
+``time.perf_counter()``, read for the ``solve_time_s`` diagnostic; it never influences
+the plan (no time limit is handed to the solver).
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from collections.abc import Mapping
 from types import MappingProxyType
 
 from companion.core import overlap
+from companion.core.planner.budget import WorkBudget
 from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import Formulation, ObstacleRows, make_formulation, relax_out_of_range
 from companion.core.planner.osqp_qp import OsqpQp
@@ -50,6 +55,8 @@ logger = logging.getLogger(__name__)
 #: ``_qp_step``), so OSQP leaves it at its tolerance times the penalty's pull rather than
 #: at zero: 5e-4 measured on a feasible ``c_max`` (contour 0.6019 against 0.6).
 C_MAX_SLACK_TOL = 1e-3
+#: Work "budget" of :meth:`Planner.qp_step` (a single QP for cross-checks): never binds.
+UNBUDGETED_WORK = 10**15
 #: The SCP has converged when no velocity moves by more than this between iterates, m/s.
 STEP_TOL_MPS = 1e-4
 
@@ -122,6 +129,8 @@ class Planner:
         v_bar = self.initial_velocities(request, data.v0, warm_start)
         p_bar = self.lag.positions(request.position, data.v0, v_bar)
         lam_bar = form.initial_lam(request, p_bar)
+        v_start = v_bar
+        budget = WorkBudget(cfg.replan_work_budget)
         notes: list[str] = []
         step: QpStep | None = None
         j_prev, slack_prev = np.inf, np.inf
@@ -129,7 +138,12 @@ class Planner:
         converged = False
         tolerance = cfg.scp_tolerance if warm_start is None else cfg.scp_tolerance_warm
         for iterations in range(1, cfg.scp_max_iterations + 1):
-            new = solve_qp(cfg, form, ws, data, v_bar, p_bar, lam_bar, first=iterations == 1)
+            new = solve_qp(cfg, form, ws, data, v_bar, p_bar, lam_bar, budget, first=iterations == 1,
+                           try_hard=step is None or not step.least_violation)
+            if new is None:              # the work budget ran out before this QP was solved
+                iterations -= 1
+                notes.append(f"work_budget: {budget.used} of {budget.total} units spent")
+                break
             if not new.solution.usable:
                 notes.append(f"solver: {new.solution.status} at iteration {iterations}")
                 break
@@ -156,7 +170,7 @@ class Planner:
             ws.last_y = step.solution.y
         if not converged and step is not None and len(notes) == 0:
             notes.append("max_iterations")
-        return self._finish(request, data, step, v_bar, iterations, notes, t0)
+        return self._finish(request, data, step, v_bar, v_start, iterations, budget, notes, t0)
 
     def qp_step(self, request: PlanRequest, velocities: np.ndarray, lam: np.ndarray | None = None) -> QpStep:
         """Solve the single QP of the SCP linearised at ``velocities`` (N, 3) (and ``lam``).
@@ -170,7 +184,8 @@ class Planner:
         p_bar = self.lag.positions(request.position, data.v0, v_bar)
         if self.formulation.carries_lam and lam is None:
             lam = self.formulation.initial_lam(request, p_bar)
-        return solve_qp(self.config, self.formulation, ws, data, v_bar, p_bar, lam, first=True)
+        unbudgeted = WorkBudget(UNBUDGETED_WORK)     # one QP for a cross-check, not a replan
+        return solve_qp(self.config, self.formulation, ws, data, v_bar, p_bar, lam, unbudgeted, first=True)
 
     def linearise(self, request: PlanRequest, positions: np.ndarray, lam: np.ndarray | None = None,
                   in_range: np.ndarray | None = None) -> ObstacleRows:
@@ -209,14 +224,17 @@ class Planner:
             # deterministically, as the rules of the air do (pass right).
             route = request.target - request.position
             v = np.broadcast_to(route / (N * tau), (N, 3)) + _right_bulge_velocities(route, N, tau)
-        # project onto |V_i| <= v_max and |V_i - V_{i-1}| <= a_max tau (forward pass)
-        vmax, da = cfg.velocity_max, cfg.accel_max * tau
-        out = np.empty((N, 3))
-        prev = v0
-        for i in range(N):
-            prev = np.clip(np.clip(v[i], prev - da, prev + da), -vmax, vmax)
-            out[i] = prev
-        return out
+        # project onto |V_i| <= v_max and |V_i - V_{i-1}| <= a_max tau (forward pass; a
+        # sequential recursion, so in Python floats: the same IEEE operations as np.clip
+        # without an array call per step and axis)
+        vmax, da = cfg.velocity_max.tolist(), (cfg.accel_max * tau).tolist()
+        rows = np.asarray(v, dtype=float).tolist()
+        prev = np.asarray(v0, dtype=float).tolist()
+        for row in rows:
+            for k in range(3):
+                x = min(max(row[k], prev[k] - da[k]), prev[k] + da[k])
+                prev[k] = row[k] = min(max(x, -vmax[k]), vmax[k])
+        return np.array(rows)
 
     # ------------------------------------------------------------------ internals
     def _workspace(self, request: PlanRequest) -> QpWorkspace:
@@ -240,7 +258,7 @@ class Planner:
         return float(max((float(s.max()) for s in slack if s.size), default=0.0))
 
     def _finish(self, request: PlanRequest, data: RequestData, step: QpStep | None, v_bar: np.ndarray,
-                iterations: int, notes: list[str], t0: float) -> Plan:
+                v_start: np.ndarray, iterations: int, budget: WorkBudget, notes: list[str], t0: float) -> Plan:
         cfg = self.config
         if step is None:
             velocities = v_bar
@@ -254,14 +272,29 @@ class Planner:
             if upper > C_MAX_SLACK_TOL:
                 notes.append(f"c_max_violated: slack {upper:.3g}")
         figs, ok = self.formulation.recheck(request, positions, data.in_range)
+        if budget.exhausted and not ok and step is not None:
+            # the best safe iterate: the last QP's solution was not; the SCP's start (the
+            # previous plan shifted, within the speed and acceleration bounds) may be
+            start = self.lag.positions(request.position, data.v0, v_start)
+            figs_start, ok = self.formulation.recheck(request, start, data.in_range)
+            if ok:
+                velocities, positions, figs = v_start.copy(), start, figs_start
+                slack_max, cost = 0.0, np.nan
+                notes.append("work_budget: returned the SCP's starting iterate (safe)")
         # the status comes from the exact figures: slack that only ate into the back-off
         # (formulations.BACKOFF_SIGMA) leaves c_min and the walls holding
-        if step is None:
+        if step is None and budget.exhausted and ok:
+            status = "optimal"
+            notes.append("work_budget: returned the SCP's starting iterate (safe)")
+        elif step is None:
             status = "failed"
         elif ok:
             status = "optimal"
             if slack_max > SLACK_TOL:
                 notes.append(f"back-off used: slack {slack_max:.3g}")
+        elif budget.exhausted:
+            status = "failed"            # out of budget with no safe iterate: the loop brakes
+            notes.append("work_budget: no safe iterate")
         elif slack_max > SLACK_TOL:
             status = "slack"
         else:
@@ -276,7 +309,7 @@ class Planner:
             velocities=velocities, commands=commands, initial_velocity=data.v0.copy(), positions=positions, eta=figs.eta, contour_of_touch=figs.contour_of_touch,
             overlap=figs.overlap, wall_margin=figs.wall_margin, in_range=data.in_range.copy(), status=status,
             iterations=iterations, solve_time_s=time.perf_counter() - t0, slack_max=slack_max, cost=cost,
-            formulation=cfg.formulation, notes=tuple(notes),
+            formulation=cfg.formulation, notes=tuple(notes), work=budget.used, admm_iterations=budget.admm_iterations,
         )
         if status != "optimal":
             logger.info("plan %s after %d iterations (slack %.3g; %s)", status, iterations, slack_max, "; ".join(notes))
