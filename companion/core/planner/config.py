@@ -210,7 +210,7 @@ class PlannerConfig:
     solver_polish: bool = False
     solver_max_iter: int = 2000
     solver_rho: float = 0.1
-    replan_work_budget: int = 8000
+    replan_work_budget: int = 12000
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
