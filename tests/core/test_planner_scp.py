@@ -89,13 +89,17 @@ def test_that_without_obstacles_the_plan_goes_straight_to_the_goal_within_bounds
     assert plan.eta.shape == (0, 20) and plan.wall_margin.shape == (0, 20)
 
 
+def _unavoidable_request(n: int = 20) -> PlanRequest:
+    """An obstacle 0.3 m ahead of the drone that follows it: no plan keeps the contours apart."""
+    means = np.broadcast_to(START + np.array([0.3, 0.0, 0.0]), (1, n, 3))
+    return PlanRequest(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (n, 3, 3)), target=GOAL,
+                       obstacle_means=means, obstacle_covs=np.broadcast_to(S, (1, n, 3, 3)), obstacle_radii=[0.5])
+
+
 def test_that_an_unavoidable_obstacle_is_never_reported_optimal():
     # an obstacle sits on the drone and follows it: no plan keeps 60 % contours apart
     cfg, _ = scenario_one()
-    n = 20
-    means = np.broadcast_to(START + np.array([0.3, 0.0, 0.0]), (1, n, 3))
-    req = PlanRequest(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (n, 3, 3)), target=GOAL,
-                      obstacle_means=means, obstacle_covs=np.broadcast_to(S, (1, n, 3, 3)), obstacle_radii=[0.5])
+    req = _unavoidable_request()
     plan = Planner(dataclasses.replace(cfg, replan_work_budget=10**6)).solve(req)   # budget not binding
     assert plan.status in ("slack", "failed")
     assert plan.status == "slack" and plan.slack_max > 0.1
@@ -106,10 +110,7 @@ def test_that_an_unavoidable_obstacle_is_never_reported_optimal():
 
 def test_that_a_replan_out_of_budget_fails_without_a_safe_iterate_and_flies_a_completed_least_violation():
     cfg, _ = scenario_one()
-    n = 20
-    means = np.broadcast_to(START + np.array([0.3, 0.0, 0.0]), (1, n, 3))
-    req = PlanRequest(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (n, 3, 3)), target=GOAL,
-                      obstacle_means=means, obstacle_covs=np.broadcast_to(S, (1, n, 3, 3)), obstacle_radii=[0.5])
+    req = _unavoidable_request()
     for budget in (200, 1000):                          # not even the hard QP completes
         plan = Planner(dataclasses.replace(cfg, replan_work_budget=budget)).solve(req)
         assert plan.work <= budget
