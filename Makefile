@@ -5,7 +5,10 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 BSTAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench campaign campaign-test venv clean
+.PHONY: demo test bench campaign campaign-test px4-test venv clean
+
+# PX4 SITL build with start-sih (see docs/PX4.md); `make px4-test` flies the companion against it.
+PX4_SITL_DIR ?= ../shared/px4-sitl
 
 $(VPY):
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python 3.11 or newer is needed, found " + sys.version' 
@@ -31,11 +34,19 @@ test: $(STAMP)
 bench: $(BSTAMP)
 	$(VPY) -m tests.benchmarks
 
+# The campaign appends every finished run to out/campaign.jsonl and resumes from it: run
+# `make campaign` again after an interruption. SCHEDULER=tcp://HOST:8786 runs it on a Dask
+# cluster (docs/CAMPAIGNS.md); CAMPAIGN_ARGS replaces the campaign's definition.
+CAMPAIGN_ARGS ?= --family antipodal --episodes 200 --methods hyperplane,paper,deterministic,bhattacharyya --seed 1
 campaign: $(STAMP)
-	$(VENV)/bin/companion campaign --family antipodal --episodes 200 --methods hyperplane,paper,deterministic,bhattacharyya --seed 1 --json out/campaign.json --plot out/campaign
+	$(VENV)/bin/companion campaign $(CAMPAIGN_ARGS) $(if $(SCHEDULER),--scheduler $(SCHEDULER)) \
+		--results out/campaign.jsonl --resume --json out/campaign.json --plot out/campaign
 
 campaign-test: $(STAMP)
 	$(VENV)/bin/pytest -q -m slow
+
+px4-test: $(STAMP)
+	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -s -m px4 tests/px4
 
 clean:
 	rm -rf $(VENV) out bench-results.json

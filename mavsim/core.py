@@ -28,6 +28,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from mavsim.autopilot import COMPID, SYSID, Autopilot, statustext
 from mavsim.errors import SimulationError
+from mavsim.noise import GaussMarkovError
 from mavsim.obstacles import ObstacleSystem, noise_factor
 from mavsim.params import ParamStore
 from mavsim.px4 import Commander
@@ -71,7 +72,7 @@ class Simulator:
         self.step_us = max(1, round(cfg.physics_step_s * 1e6))
         seeds = np.random.SeedSequence(self.seed).spawn(1 + len(scenario.obstacles))
         self._rng = np.random.Generator(np.random.PCG64(seeds[0]))
-        self._Lp = noise_factor(cfg.position_noise_cov_m2)
+        self._position_error = GaussMarkovError(noise_factor(cfg.position_noise_cov_m2), cfg.position_noise_correlation_s)
         self._Lv = noise_factor(cfg.velocity_noise_cov_m2ps2)
         self.vparams = VehicleParams(cfg.velocity_time_constant_s, cfg.accel_max_mps2)
         self.vehicle = initial_state(scenario.start_ned_m, cfg.start_yaw_rad)
@@ -114,7 +115,8 @@ class Simulator:
         if self._est_t != self.now_us:
             w = self._rng.standard_normal(6)
             v = self.vehicle
-            self._est = (v.position_ned_m + self._Lp @ w[:3], v.velocity_ned_mps + self._Lv @ w[3:])
+            self._est = (v.position_ned_m + self._position_error.sample(self.now_us, w[:3]),
+                         v.velocity_ned_mps + self._Lv @ w[3:])
             self._est_t = self.now_us
         return self._est
 

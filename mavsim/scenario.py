@@ -18,6 +18,10 @@ physics_step_s : float, default 0.01
 position_noise_cov_m2 : 3x3, default 0.001 I
     Covariance of the Gaussian noise on reported drone positions (NED, m^2); the
     ODOMETRY pose covariance reports exactly this matrix.
+position_noise_correlation_s : float, default 0
+    Correlation time of that error (s): a first-order Gauss-Markov process with the
+    covariance above at every instant, as an EKF's error wanders (``mavsim.noise``);
+    0 draws it afresh at every instant (white).
 velocity_noise_cov_m2ps2 : 3x3, default 0.001 I
     Covariance of the noise on reported drone velocities ((m/s)^2).
 start_airborne : bool, default ``start_ned_m[2] < 0``
@@ -89,6 +93,7 @@ class SimConfig:
     accel_max_mps2: float = 4.0
     physics_step_s: float = 0.01
     position_noise_cov_m2: np.ndarray = field(default_factory=lambda: 1e-3 * np.eye(3))
+    position_noise_correlation_s: float = 0.0
     velocity_noise_cov_m2ps2: np.ndarray = field(default_factory=lambda: 1e-3 * np.eye(3))
     start_airborne: bool = True
     start_armed: bool = True
@@ -157,7 +162,7 @@ class Scenario:
 
 
 _SIM_KEYS = {
-    "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2",
+    "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2", "position_noise_correlation_s",
     "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
     "home_lat_deg", "home_lon_deg", "home_alt_m", "arming_delay_s", "offboard_reject_ack",
     "params", "stream_rates_hz",
@@ -294,6 +299,7 @@ def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
         accel_max_mps2=s.number("accel_max_mps2", 4.0, positive=True),
         physics_step_s=s.number("physics_step_s", 0.01, lo=1e-4, hi=0.1),
         position_noise_cov_m2=s.covariance("position_noise_cov_m2", 1e-3 * np.eye(3)),
+        position_noise_correlation_s=s.number("position_noise_correlation_s", 0.0, lo=0.0, hi=3600.0),
         velocity_noise_cov_m2ps2=s.covariance("velocity_noise_cov_m2ps2", 1e-3 * np.eye(3)),
         start_airborne=airborne,
         start_armed=s.boolean("start_armed", airborne),

@@ -39,3 +39,11 @@ def positive_seconds(text: str) -> float:
     if not value > 0.0:
         raise argparse.ArgumentTypeError(f"must be > 0 s, got {text}")
     return value
+
+
+def non_negative_seconds(text: str) -> float:
+    """A duration in seconds, >= 0 and finite (0: none)."""
+    value = _number(text, float)
+    if not 0.0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be >= 0 s and finite, got {text}")
+    return value

@@ -2,11 +2,13 @@
 
 Draws ``--episodes`` encounters of a ``--family`` from ``--seed``, flies each one with
 every method of ``--methods`` in lockstep (mavsim plus the companion over MAVLink
-bytes), in parallel over ``--workers`` processes, and prints one table row per method:
-collisions with a 95 % Clopper-Pearson interval, the per-step collision frequency
-against the bound ``Phi(-r_min)``, the share of steps below ``c_min``, goal reached,
-time to goal, planner failures, slack use and solve times. ``--episode I`` re-runs
-episode ``I`` alone (same encounter, same simulator seed).
+bytes), in parallel over ``--workers`` processes or on a Dask cluster (``--scheduler``),
+appends every finished run to a results file (``--results``; ``--resume`` continues it),
+and prints one table row per method computed from that file: collisions with a 95 %
+Clopper-Pearson interval, the per-step collision frequency against the bound
+``Phi(-r_min)``, the share of steps below ``c_min``, goal reached, time to goal, planner
+failures, slack use and solve times. ``--episode I`` re-runs episode ``I`` alone (same
+encounter, same simulator seed).
 """
 
 from __future__ import annotations
@@ -16,8 +18,18 @@ import json
 import logging
 from pathlib import Path
 
-from companion.commands._argtypes import integer_at_least, open_unit_interval, positive_seconds
-from companion.offline.campaign import DEFAULT_DURATION_S, FAMILIES, METHODS, format_table, run_campaign
+from companion.commands._argtypes import integer_at_least, non_negative_seconds, open_unit_interval, positive_seconds
+from companion.errors import ConfigError
+from companion.offline.campaign import (
+    DEFAULT_DURATION_S,
+    FAMILIES,
+    METHODS,
+    format_table,
+    generate_scenario,
+    run_campaign,
+    write_scenario,
+)
+from companion.offline.campaign.progress import MODES as PROGRESS_MODES
 
 logger = logging.getLogger(__name__)
 
@@ -43,14 +55,42 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--methods", type=_methods, default=list(METHODS), help="comma-separated planner formulations",
                    metavar=",".join(METHODS))
     p.add_argument("--seed", type=int, default=0, help="campaign seed (episode i uses default_rng([seed, i]))")
-    p.add_argument("--workers", type=integer_at_least(1), default=None, help="worker processes (default: CPU count)")
+    p.add_argument("--workers", type=integer_at_least(1), default=None, help="local worker processes (default: CPU count)")
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="run the episodes on a Dask distributed cluster (e.g. tcp://10.0.0.5:8786); "
+                        "needs pip install 'ogccmpc[cluster]'")
     p.add_argument("--episode", type=integer_at_least(0), default=None, metavar="I",
                    help="run only episode I of this campaign (reproduce one encounter)")
+    p.add_argument("--save-scenario", metavar="FILE", default=None,
+                   help="with --episode: also write the episode's scenario as a TOML file (fly it with companion demo)")
     p.add_argument("--c-min", type=open_unit_interval, default=0.90, help="contour of touch that may not be crossed")
     p.add_argument("--duration", type=positive_seconds, default=DEFAULT_DURATION_S, help="simulated seconds per episode")
+    p.add_argument("--drone-noise-correlation", type=non_negative_seconds, default=0.0, metavar="SECONDS",
+                   help="correlation time of the simulated drone position error (Gauss-Markov, as an EKF's error "
+                        "wanders; same covariance, reported honestly); 0: white")
+    p.add_argument("--results", metavar="FILE", default=None,
+                   help="results file (JSON lines, one finished run per line, appended as runs finish; "
+                        "default: beside --json with the suffix .jsonl, else campaign-FAMILY-seedS.jsonl; "
+                        "none with --episode)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the results file: run only the runs it does not hold yet")
+    p.add_argument("--progress", choices=PROGRESS_MODES, default="auto",
+                   help="progress bar on a terminal, a one-line log every 30 s otherwise")
     p.add_argument("--json", metavar="FILE", help="write the summary and per-episode rows as JSON")
     p.add_argument("--plot", metavar="DIR", help="draw the campaign figures (PNG) into DIR")
     p.set_defaults(func=run)
+
+
+def results_path(args: argparse.Namespace) -> Path | None:
+    """The results file: ``--results``, else beside ``--json``, else in the working directory;
+    none for ``--episode I`` (re-running one encounter) unless ``--results`` names one."""
+    if args.results:
+        return Path(args.results)
+    if args.episode is not None:
+        return None
+    if args.json:
+        return Path(args.json).with_suffix(".jsonl")
+    return Path(f"campaign-{args.family}-seed{args.seed}.jsonl")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,13 +100,25 @@ def run(args: argparse.Namespace) -> int:
         # table, not as hundreds of log lines from the worker processes.
         for name in QUIET_LOGGERS:
             logging.getLogger(name).setLevel(logging.ERROR)
+    if args.save_scenario and args.episode is None:
+        raise ConfigError("--save-scenario needs --episode I (which episode to save)")
     episodes = [args.episode] if args.episode is not None else range(args.episodes)
-    result = run_campaign(args.family, episodes, args.methods, args.seed, workers=args.workers,
-                          c_min=args.c_min, duration_s=args.duration)
+    if args.save_scenario:
+        path = write_scenario(generate_scenario(args.family, args.seed, args.episode, c_min=args.c_min,
+                                                duration_s=args.duration,
+                                                drone_noise_correlation_s=args.drone_noise_correlation),
+                              args.save_scenario)
+        print(f"wrote {path}")
+    store = results_path(args)
+    result = run_campaign(args.family, episodes, args.methods, args.seed, workers=args.workers, c_min=args.c_min,
+                          duration_s=args.duration, progress=args.progress, results_path=store, resume=args.resume,
+                          scheduler=args.scheduler, drone_noise_correlation_s=args.drone_noise_correlation)
     print(format_table(result))
+    if store is not None:
+        print(f"results: {store}")
     if args.episode is not None:
         for row in result.results:
-            print(json.dumps({k: v for k, v in row.items() if k not in ("solve_times_s", "truth")}, default=float))
+            print(json.dumps({k: v for k, v in row.to_json(pooled=False).items() if k != "truth"}, default=float))
     if args.json:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)

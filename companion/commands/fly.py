@@ -37,7 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--tlog", default=None, help="record the link to this tlog")
     p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S wall seconds")
-    p.add_argument("--exit-after-goal", type=float, default=None, metavar="S", help="stop S seconds after the goal is reached")
+    p.add_argument("--exit-after-goal", type=float, default=None, metavar="S",
+                   help="S seconds after the goal is reached, switch the vehicle to Hold (AUTO.LOITER) and stop "
+                        "once the HEARTBEAT shows it holding")
     p.add_argument("--json", action="store_true", help="print the run report as JSON")
     p.set_defaults(func=run)
 
@@ -54,15 +56,14 @@ def run(args: argparse.Namespace) -> int:
         overrides["c_max"] = None
     scenario = load_scenario(args.scenario, **overrides)
     offboard = scenario.loop.offboard_config(
-        arm=args.arm, takeoff_alt_m=args.takeoff_alt, reengage=args.reengage or scenario.loop.reengage
+        arm=args.arm, takeoff_alt_m=args.takeoff_alt, reengage=args.reengage or scenario.loop.reengage,
+        hold_after_goal_s=args.exit_after_goal,
     )
     companion = Companion(scenario, offboard=offboard)
 
     def stop(c: Companion) -> bool:
-        t_goal = c.state.goal_reached_t_s
-        if args.exit_after_goal is not None and t_goal is not None and c.records:
-            return c.records[-1].t_link_s - t_goal >= args.exit_after_goal
-        return c.sequencer.phase.name == "GAVE_UP"
+        """Once the vehicle holds after --exit-after-goal (the sequencer hands it back), or on giving up."""
+        return c.sequencer.phase.name in ("HELD", "GAVE_UP")
 
     link = open_link(args.connect, tlog=args.tlog, clock=microsecond_clock)
     started = microsecond_clock()
@@ -75,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
     report = companion_report(companion)
     for key in ("events", "failsafe_events"):  # seconds since the start of this run, not epoch
         report[key] = [(round(t - started, 2), text) for t, text in report[key]]
+    if report.get("goal_reached_companion_t_s") is not None:
+        report["goal_reached_companion_t_s"] = round(report["goal_reached_companion_t_s"] - started, 2)
     if stats is not None:
         report["ticks"], report["late_ticks"] = stats.ticks, stats.late_ticks
     if args.json:

@@ -34,6 +34,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--formulation", default=None, help="planner formulation the recorded run used (overrides the scenario)")
     p.add_argument("--time-offset", type=float, default=None, metavar="S",
                    help="seconds subtracted from tlog stamps (default: detect a lockstep log, else 0)")
+    p.add_argument("--arm", action="store_true", help="the recorded run armed the vehicle (fly --arm)")
+    p.add_argument("--takeoff-alt", type=float, default=None, metavar="M", help="the recorded run took off (fly --takeoff-alt M)")
+    p.add_argument("--exit-after-goal", type=float, default=None, metavar="S",
+                   help="the recorded run handed back S seconds after the goal (fly --exit-after-goal S)")
     p.add_argument("--json", action="store_true", help="print the replay summary as JSON")
     p.add_argument("--plot", default=None, metavar="DIR", help="write the flight figures (PNG) here")
     p.set_defaults(func=run)
@@ -74,7 +78,11 @@ def _format(summary: dict) -> str:
 
 def run(args: argparse.Namespace) -> int:
     overrides = {"formulation": args.formulation} if args.formulation else {}
-    result = replay(args.log, args.scenario, time_offset_s=args.time_offset, **overrides)
+    from companion.loop.config import load_scenario
+
+    offboard = load_scenario(args.scenario, **overrides).loop.offboard_config(
+        arm=args.arm, takeoff_alt_m=args.takeoff_alt, hold_after_goal_s=args.exit_after_goal)
+    result = replay(args.log, args.scenario, time_offset_s=args.time_offset, offboard=offboard, **overrides)
     summary = result.summary()
     if args.plot:
         from companion.plots.flight_figures import write_flight_figures

@@ -109,6 +109,7 @@ class Companion:
         self._offsets: deque[tuple[float, float]] = deque(maxlen=64)
         self._plan: Plan | None = None
         self._plan_t0_v = 0.0
+        self._plan_p0 = np.zeros(3)
         self._last_replan_t: float | None = None
         self._command = np.zeros(3)
         self._last_hb_t: float | None = None
@@ -215,9 +216,31 @@ class Companion:
             self._command = np.zeros(3)  # hover while PX4 is asked to switch
         else:
             self._command = self._engaged_command(t_s, out)
-        target = self.autopilot or (1, 1)
-        out.append(messages.velocity_setpoint(t_boot_ms, self._command, target_system=target[0], target_component=target[1]))
+        target = dict(zip(("target_system", "target_component"), self.autopilot or (1, 1)))
+        reference = self._plan_reference(t_s) if seq.engaged and self.loop.setpoint_kind == "position_velocity" else None
+        if reference is not None:
+            out.append(messages.position_velocity_setpoint(t_boot_ms, *reference, **target))
+        else:
+            out.append(messages.velocity_setpoint(t_boot_ms, self._command, **target))
         return out
+
+    def _plan_reference(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """Position and velocity of the current plan at link time ``t_s`` (NED m, m/s), while tracking it.
+
+        The position interpolates the plan's step-end positions from where it started;
+        the velocity is the vehicle's under the plan's commands (the planner's model).
+        PX4's position loop then adds ``MPC_XY_P (p - p_est)`` to the feed-forward.
+        """
+        t_v = self.vehicle_time(t_s)
+        if self.state.mode != "tracking" or self._plan is None or t_v is None:
+            return None
+        dt = t_v - self._plan_t0_v
+        plan, tau = self._plan, self.cfg.step_s
+        times = tau * np.arange(plan.positions.shape[0] + 1)
+        points = np.vstack([self._plan_p0[None], plan.positions])
+        position = np.array([np.interp(dt, times, points[:, k]) for k in range(3)])
+        velocity = self.planner.lag.velocity_at(plan.initial_velocity, plan.commands, dt)
+        return position, np.asarray(velocity, dtype=float)
 
     def _say(self, t_s: float, severity: int, text: str) -> mavlink2.MAVLink_statustext_message:
         self.state.events.append((t_s, text))
@@ -299,7 +322,7 @@ class Companion:
         the corridor runs weave: 0.6-0.75 m from the walls against 0.98 m (6 seeds).
         Without a current plan (braking, or before the first) the estimate is used.
         """
-        if self.cfg.velocity_time_constant_s <= 0.0:
+        if self.planner.lag.instantaneous:
             return self._command.copy()
         if self._plan is None:
             return np.asarray(est.velocity, dtype=float).copy()
@@ -320,6 +343,7 @@ class Companion:
             drone_covs = np.broadcast_to(cov_now, (n, 3, 3)).copy()
         if np.linalg.norm(position - self.scenario.mission.goal) <= self.scenario.mission.goal_tolerance_m and self.state.goal_reached_t_s is None:
             self.state.goal_reached_t_s = t_s
+            self.sequencer.on_goal_reached(t_s)
             out.append(self._say(t_s, SEV_INFO, "companion: goal reached"))
 
         self.tracker.prune(t_v)
@@ -379,6 +403,7 @@ class Companion:
                     out.append(self._say(t_s, SEV_WARNING, f"companion: safety slack used ({plan.slack_max:.2f})"))
             self._plan = plan
             self._plan_t0_v = t_v
+            self._plan_p0 = position.copy()
         # Obstacles beyond sensing range were ignored by design: their contour says nothing.
         ct_plan = np.asarray(plan.contour_of_touch)[np.asarray(plan.in_range, dtype=bool)]
         self.records.append(

@@ -108,6 +108,9 @@ class LoopConfig:
     drone_cov_floor_m2 : isotropic floor added to the drone's planning covariance.
 
     prestream_s, retry_period_s, max_retries, reengage : OFFBOARD engagement (see ``companion.mavlink.offboard``).
+    setpoint_kind : ``"velocity"`` (default) streams the plan's velocity commands;
+        ``"position_velocity"`` streams the plan's position with its velocity as feed-forward
+        while tracking a plan (PX4's position loop removes the slow tail of its velocity response).
     """
 
     setpoint_rate_hz: float = 20.0
@@ -119,6 +122,7 @@ class LoopConfig:
     retry_period_s: float = 1.0
     max_retries: int = 5
     reengage: bool = False
+    setpoint_kind: str = "velocity"
 
     def offboard_config(self, **overrides: object) -> OffboardConfig:
         """The engagement settings of this loop, with ``overrides`` (e.g. ``arm``, ``takeoff_alt_m``)."""
@@ -128,6 +132,8 @@ class LoopConfig:
     def __post_init__(self) -> None:
         if not self.setpoint_rate_hz >= 10.0:
             raise ConfigError(f"[companion] setpoint_rate_hz must be >= 10 Hz (PX4 needs > 2 Hz), got {self.setpoint_rate_hz!r}")
+        if self.setpoint_kind not in ("velocity", "position_velocity"):
+            raise ConfigError(f"[companion] setpoint_kind must be 'velocity' or 'position_velocity', got {self.setpoint_kind!r}")
         if self.drone_covariance not in ("reported", "estimate", "predicted"):
             raise ConfigError(f"[companion] drone_covariance must be 'reported', 'estimate' or 'predicted', got {self.drone_covariance!r}")
 
@@ -179,6 +185,18 @@ def load_scenario(path: str | Path, **planner_overrides: Any) -> CompanionScenar
         raise ConfigError(f"{path}: scenario file not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    return scenario_from_dict(data, str(path), **planner_overrides)
+
+
+def scenario_from_dict(data: dict[str, Any], source: str = "<dict>", **planner_overrides: Any) -> CompanionScenario:
+    """The companion's sections of a parsed scenario (``tomllib`` output; ``source`` names it in errors).
+
+    Raises
+    ------
+    ConfigError
+        As :func:`load_scenario`, naming ``source`` instead of a file.
+    """
+    path = Path(source)
     unknown = sorted(set(data) - _TOP_LEVEL)
     if unknown:
         raise ConfigError(f"{path}: unknown section(s) {', '.join(unknown)}")

@@ -53,9 +53,9 @@ def run_realtime(
     start = clock()
     next_tick = start
     while True:
-        now = clock()
         for rx in link.poll():
             companion.handle(rx)
+        now = clock()  # after the poll: every message handled before a tick is stamped no later than it
         if now >= next_tick:
             for msg in companion.tick(now):
                 link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times

@@ -38,6 +38,8 @@ TM_FORCE, TM_YAW, TM_YAW_RATE = 512, 1024, 2048
 TYPE_MASK_VELOCITY = TM_X | TM_Y | TM_Z | TM_AX | TM_AY | TM_AZ | TM_YAW | TM_YAW_RATE
 #: Velocity and yaw (yaw rate ignored), as MAVSDK's VelocityNed: 2503.
 TYPE_MASK_VELOCITY_YAW = TYPE_MASK_VELOCITY & ~TM_YAW
+#: Position with velocity feed-forward, yaw and yaw rate ignored: 3520.
+TYPE_MASK_POSITION_VELOCITY = TM_AX | TM_AY | TM_AZ | TM_YAW | TM_YAW_RATE
 
 MAV_FRAME_LOCAL_NED = mavlink2.MAV_FRAME_LOCAL_NED  # 1
 MAV_FRAME_LOCAL_FRD = mavlink2.MAV_FRAME_LOCAL_FRD  # 20
@@ -427,6 +429,35 @@ def velocity_setpoint(
     )
 
 
+def position_velocity_setpoint(
+    t_boot_ms: int,
+    p_ned,
+    v_ned,
+    *,
+    target_system: int = 1,
+    target_component: int = 1,
+) -> mavlink2.MAVLink_set_position_target_local_ned_message:
+    """SET_POSITION_TARGET_LOCAL_NED with a position and its velocity feed-forward (type_mask 3520).
+
+    PX4's position loop tracks ``p_ned`` (metres, NED) and adds ``v_ned`` (m/s, NED) to its
+    velocity setpoint, as MAVSDK's ``PositionNedYaw`` + ``VelocityNedYaw`` offboard users do.
+
+    Raises
+    ------
+    InputError
+        If either vector is not three finite numbers.
+    """
+    p, v = np.asarray(p_ned, dtype=float), np.asarray(v_ned, dtype=float)
+    if p.shape != (3,) or v.shape != (3,) or not (np.all(np.isfinite(p)) and np.all(np.isfinite(v))):
+        raise InputError(f"position + velocity setpoint must be 3 finite metres and 3 finite m/s (NED), "
+                         f"got {p_ned!r}, {v_ned!r}")
+    return mavlink2.MAVLink_set_position_target_local_ned_message(
+        _boot_ms(t_boot_ms), int(target_system), int(target_component), MAV_FRAME_LOCAL_NED,
+        TYPE_MASK_POSITION_VELOCITY, float(p[0]), float(p[1]), float(p[2]), float(v[0]), float(v[1]), float(v[2]),
+        0.0, 0.0, 0.0, 0.0, 0.0,
+    )
+
+
 def companion_heartbeat(system_status: int = mavlink2.MAV_STATE_ACTIVE) -> mavlink2.MAVLink_heartbeat_message:
     """HEARTBEAT of the companion: type ONBOARD_CONTROLLER (18), autopilot INVALID (8)."""
     return mavlink2.MAVLink_heartbeat_message(
@@ -490,6 +521,11 @@ def command_long(
     return mavlink2.MAVLink_command_long_message(
         int(target_system), int(target_component), int(command), int(confirmation) & 0xFF, *values
     )
+
+
+def request_message_command(message_id: int, **target) -> mavlink2.MAVLink_command_long_message:
+    """MAV_CMD_REQUEST_MESSAGE (512): param1 = the id of the message wanted (e.g. HOME_POSITION 242)."""
+    return command_long(mavlink2.MAV_CMD_REQUEST_MESSAGE, (float(int(message_id)),), **target)
 
 
 def set_mode_command(custom_mode: int, armed: bool, **target) -> mavlink2.MAVLink_command_long_message:

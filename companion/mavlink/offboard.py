@@ -10,14 +10,23 @@ ACKs can arrive twice.
 Phases::
 
     WAIT_AUTOPILOT -> [ARMING] -> [TAKEOFF] -> WAIT_ARMED -> PRESTREAM
-        -> REQUEST_OFFBOARD -> ENGAGED
+        -> REQUEST_OFFBOARD -> ENGAGED --hand_back()--> HANDING_BACK -> HELD
     ENGAGED --heartbeat leaves OFFBOARD or disarms--> PILOT_TOOK_OVER (terminal
         unless ``reengage``, which goes back to PRESTREAM)
     any but PILOT_TOOK_OVER/GAVE_UP --no autopilot HEARTBEAT > 3 s--> LINK_LOST
     ARMING / TAKEOFF / REQUEST_OFFBOARD --retries exhausted--> GAVE_UP
 
 ARMING and TAKEOFF run only when configured (``arm``, ``takeoff_alt_m``);
-otherwise WAIT_ARMED waits for the pilot to arm. Setpoints may be streamed in
+otherwise WAIT_ARMED waits for the pilot to arm. A takeoff waits for the home
+altitude (HOME_POSITION, which PX4 streams only every 2 s; requested with
+MAV_CMD_REQUEST_MESSAGE every ``retry_period_s`` from the moment the autopilot is
+seen): PX4 takes param7 as AMSL, and without it climbs to MIS_TAKEOFF_ALT (seen in 7
+of 10 takeoffs on PX4 SITL). No home within ``takeoff_timeout_s``: GAVE_UP.
+
+At the end of a mission :meth:`OffboardSequencer.hand_back` asks for Hold
+(AUTO.LOITER) while the setpoints still stream (zero velocity), and the stream
+stops only once the HEARTBEAT shows the vehicle out of OFFBOARD (HELD): stopping
+the stream in OFFBOARD is a failsafe for PX4 ("Failsafe activated", RTL). Setpoints may be streamed in
 PRESTREAM, REQUEST_OFFBOARD and ENGAGED (``state.streaming``); the companion
 commands the vehicle only in ENGAGED (``state.engaged``).
 
@@ -65,12 +74,16 @@ class Phase(enum.Enum):
     PRESTREAM = "PRESTREAM"
     REQUEST_OFFBOARD = "REQUEST_OFFBOARD"
     ENGAGED = "ENGAGED"
+    HANDING_BACK = "HANDING_BACK"
+    HELD = "HELD"
     PILOT_TOOK_OVER = "PILOT_TOOK_OVER"
     LINK_LOST = "LINK_LOST"
     GAVE_UP = "GAVE_UP"
 
 
-_STREAMING = frozenset({Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED})
+_STREAMING = frozenset({Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED, Phase.HANDING_BACK})
+#: Phases in which nothing more happens (no heartbeat watch, no commands).
+_FINAL = frozenset({Phase.LINK_LOST, Phase.GAVE_UP, Phase.PILOT_TOOK_OVER, Phase.HELD})
 
 
 @dataclass(frozen=True)
@@ -92,12 +105,16 @@ class OffboardConfig:
         Arm the vehicle ourselves (otherwise wait for the pilot to arm).
     takeoff_alt_m : float or None
         Take off (MAV_CMD_NAV_TAKEOFF) to this height above home, metres,
-        before requesting OFFBOARD. Without a home altitude (see
-        :meth:`OffboardSequencer.on_home_altitude`) PX4's MIS_TAKEOFF_ALT is used.
+        before requesting OFFBOARD, once the home altitude is known (see
+        :meth:`OffboardSequencer.on_home_altitude`).
     takeoff_timeout_s : float
-        Seconds allowed from the takeoff request to AUTO.LOITER.
+        Seconds allowed for the home altitude to arrive, and again from the
+        takeoff request to AUTO.LOITER.
     reengage : bool
         Request OFFBOARD again after the vehicle left it while engaged.
+    hold_after_goal_s : float or None
+        Seconds after :meth:`OffboardSequencer.on_goal_reached` to hand the
+        vehicle back (Hold, see :meth:`OffboardSequencer.hand_back`); None never.
     heartbeat_timeout_s : float
         Autopilot heartbeat silence that counts as a lost link (MAVSDK: 3 s).
     """
@@ -110,6 +127,7 @@ class OffboardConfig:
     takeoff_timeout_s: float = 30.0
     reengage: bool = False
     heartbeat_timeout_s: float = 3.0
+    hold_after_goal_s: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("prestream_s", "retry_period_s", "takeoff_timeout_s", "heartbeat_timeout_s"):
@@ -120,6 +138,10 @@ class OffboardConfig:
             raise ConfigError("offboard config: retry_period_s and heartbeat_timeout_s must be > 0")
         if not (isinstance(self.max_retries, int) and self.max_retries >= 0):
             raise ConfigError(f"offboard config: max_retries must be an integer >= 0, got {self.max_retries!r}")
+        if self.hold_after_goal_s is not None and not (math.isfinite(self.hold_after_goal_s)
+                                                        and self.hold_after_goal_s >= 0.0):
+            raise ConfigError(f"offboard config: hold_after_goal_s must be finite seconds >= 0, got "
+                              f"{self.hold_after_goal_s!r}")
         if self.takeoff_alt_m is not None and not (math.isfinite(self.takeoff_alt_m) and self.takeoff_alt_m > 0):
             raise ConfigError(f"offboard config: takeoff_alt_m must be > 0 metres, got {self.takeoff_alt_m!r}")
 
@@ -198,6 +220,8 @@ class OffboardSequencer:
         self._was_engaged = False
         self._seen_takeoff_mode = False
         self._home_alt_amsl_m: float | None = None
+        self._home_requested_s: float | None = None
+        self._goal_s: float | None = None
         self._actions: list[Action] = []
         self.events: list[Event] = []
 
@@ -280,16 +304,50 @@ class OffboardSequencer:
         """Advance time to ``t_s`` (seconds, the loop's clock); return the actions to take."""
         if self._since is None:
             self._since = t_s
-        if self._hb_t is not None and self._phase not in (Phase.LINK_LOST, Phase.GAVE_UP, Phase.PILOT_TOOK_OVER):
+        if self._hb_t is not None and self._phase not in _FINAL:
             if t_s - self._hb_t > self.config.heartbeat_timeout_s:
                 self._pending = None
                 self._transition(t_s, Phase.LINK_LOST,
                                  f"no autopilot HEARTBEAT for {t_s - self._hb_t:.1f} s; stopped commanding",
                                  mavlink2.MAV_SEVERITY_WARNING)
+        hold_after = self.config.hold_after_goal_s
+        if hold_after is not None and self._goal_s is not None and t_s - self._goal_s >= hold_after - 1e-9:
+            self.hand_back(t_s, "goal reached")
         self._advance(t_s)
+        self._request_home(t_s)
         self._retry(t_s)
         actions, self._actions = self._actions, []
         return actions
+
+    def on_goal_reached(self, t_s: float) -> None:
+        """The mission's goal was reached at ``t_s``: hand back after ``hold_after_goal_s``, if set."""
+        if self._goal_s is None:
+            self._goal_s = t_s
+
+    def hand_back(self, t_s: float, reason: str = "mission complete") -> None:
+        """Ask for Hold (AUTO.LOITER) and keep streaming until the HEARTBEAT shows the vehicle out of OFFBOARD.
+
+        Only from PRESTREAM, REQUEST_OFFBOARD or ENGAGED (a vehicle we may be
+        streaming to); elsewhere nothing is streaming and nothing is done.
+        """
+        if self._phase not in (Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED):
+            return
+        self._pending = None
+        self._transition(t_s, Phase.HANDING_BACK, f"{reason}; requesting Hold (AUTO.LOITER)",
+                         mavlink2.MAV_SEVERITY_NOTICE)
+        if self._target is not None:
+            self._send(t_s, messages.hold_command(bool(self._hb and self._hb.armed), **self._tgt()))
+        self._advance(t_s)
+
+    def _request_home(self, t_s: float) -> None:
+        """Request HOME_POSITION every retry period while a takeoff needs it."""
+        if (self.config.takeoff_alt_m is None or self._home_alt_amsl_m is not None or self._target is None
+                or self._seen_takeoff_mode or self._phase not in (Phase.ARMING, Phase.TAKEOFF, Phase.WAIT_ARMED)):
+            return
+        if self._home_requested_s is None or t_s - self._home_requested_s >= self.config.retry_period_s:
+            self._home_requested_s = t_s
+            self._actions.append(SendCommand(messages.request_message_command(
+                mavlink2.MAVLINK_MSG_ID_HOME_POSITION, **self._tgt())))
 
     # ------------------------------------------------------------------ machinery
 
@@ -325,6 +383,11 @@ class OffboardSequencer:
             elif self._pending is None:
                 self._send(t_s, messages.arm_command(True, **self._tgt()))
         elif phase is Phase.TAKEOFF:
+            if self._home_alt_amsl_m is None and not self._seen_takeoff_mode:
+                if self._since is not None and t_s - self._since > cfg.takeoff_timeout_s:
+                    self._transition(t_s, Phase.GAVE_UP, f"no HOME_POSITION after {cfg.takeoff_timeout_s:.0f} s: "
+                                     "the takeoff altitude cannot be formed", mavlink2.MAV_SEVERITY_WARNING)
+                return
             if self._pending is None and not self._seen_takeoff_mode:
                 self._send(t_s, messages.takeoff_command(self._takeoff_param7(), **self._tgt()))
             if self._seen_takeoff_mode and hb.mode == "AUTO.LOITER":
@@ -351,6 +414,12 @@ class OffboardSequencer:
                 self._transition(t_s, self._entry_phase(hb), "vehicle disarmed before OFFBOARD")
             elif hb.offboard:
                 self._engage(t_s, "OFFBOARD confirmed by HEARTBEAT")
+        elif phase is Phase.HANDING_BACK:
+            if not hb.offboard or not hb.armed:
+                self._pending = None
+                self._transition(t_s, Phase.HELD, f"vehicle in {hb.mode or 'unknown mode'}"
+                                 + ("" if hb.armed else ", disarmed") + "; stopped streaming",
+                                 mavlink2.MAV_SEVERITY_NOTICE)
         elif phase is Phase.ENGAGED:
             if not hb.offboard:
                 self._left_offboard(t_s, f"vehicle left OFFBOARD for {hb.mode}")
@@ -400,6 +469,8 @@ class OffboardSequencer:
             msg = messages.takeoff_command(self._takeoff_param7(), confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.REQUEST_OFFBOARD:
             msg = messages.set_mode_command(px4.OFFBOARD, armed, confirmation=pending.attempts, **self._tgt())
+        elif self._phase is Phase.HANDING_BACK:
+            msg = messages.set_mode_command(px4.AUTO_LOITER, armed, confirmation=pending.attempts, **self._tgt())
         else:
             self._pending = None
             return
@@ -427,7 +498,7 @@ class OffboardSequencer:
             return
         old = self._phase
         if phase is Phase.TAKEOFF and self._home_alt_amsl_m is None:
-            reason += " (no home altitude: PX4 takes off to MIS_TAKEOFF_ALT)"
+            reason += " (waiting for HOME_POSITION)"
         self._phase, self._since, self._reason = phase, t_s, reason
         logger.log(logging.WARNING if severity <= mavlink2.MAV_SEVERITY_WARNING else logging.INFO,
                    "offboard %s -> %s: %s", old.value, phase.value, reason)

@@ -14,7 +14,7 @@ import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -22,8 +22,10 @@ from companion.loop.app import Companion
 from companion.mavlink.link import MemoryLink
 from companion.mavlink.offboard import OffboardConfig
 from companion.offline.report import run_report
-from companion.loop.config import load_scenario
+from companion.offline.slack import companion_slack_report
+from companion.loop.config import CompanionScenario, load_scenario, scenario_from_dict
 from mavsim.lockstep import LockstepSimulator
+from mavsim.scenario import scenario_from_dict as sim_scenario_from_dict
 
 logger = logging.getLogger(__name__)
 
@@ -46,12 +48,18 @@ class RunResult:
     extra: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
-        """The numbers ``companion demo`` prints (JSON-serialisable): truth plus the companion's view."""
-        return {"seed": self.seed, "dropped_packets": self.dropped_packets, **run_report(self.companion, self.truth)}
+        """The numbers ``companion demo`` prints (JSON-serialisable): truth plus the companion's view,
+        and under ``slack`` the slack replans and how far inside ``c_min`` they went."""
+        return {"seed": self.seed, "dropped_packets": self.dropped_packets, **run_report(self.companion, self.truth),
+                "slack": companion_slack_report(self.companion).to_json()}
+
+
+#: A scenario as ``run_lockstep`` takes it: a TOML file, or its parsed tables (``tomllib`` output).
+ScenarioSource = str | Path | Mapping[str, Any]
 
 
 def run_lockstep(
-    scenario_path: str | Path,
+    scenario: ScenarioSource,
     *,
     seed: int = 0,
     duration_s: float | None = None,
@@ -68,8 +76,9 @@ def run_lockstep(
 
     Parameters
     ----------
-    scenario_path : scenario TOML file (both programs read it; the companion never reads
-        the obstacles' scripted paths).
+    scenario : scenario TOML file, or its parsed tables (a dict, e.g. a generated campaign
+        episode): both programs read it, parsed once; the companion never reads the
+        obstacles' scripted paths.
     seed : seeds the simulator's noise and the packet loss.
     duration_s : simulated time limit (default: the scenario's ``duration_s``).
     tlog_path : record the companion's link as a tlog (what ``companion replay`` reads).
@@ -80,13 +89,17 @@ def run_lockstep(
     inject : ``inject(t_s) -> [packet, ...]`` extra packets delivered to the companion.
     **planner_overrides : replace ``[planner]`` keys (e.g. ``formulation``, ``c_max``).
     """
-    scenario = load_scenario(scenario_path, **planner_overrides)
-    sim = LockstepSimulator.from_file(scenario_path, seed=seed, tlog=sim_tlog_path)
-    companion = Companion(scenario, offboard=offboard)
+    if isinstance(scenario, (str, Path)):
+        config = load_scenario(scenario, **planner_overrides)
+        sim = LockstepSimulator.from_file(scenario, seed=seed, tlog=sim_tlog_path)
+    else:
+        config, sim_scenario = _parse(scenario, planner_overrides)
+        sim = LockstepSimulator(sim_scenario, seed=seed, tlog=sim_tlog_path)
+    companion = Companion(config, offboard=offboard)
     link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path)
     rng = np.random.default_rng([seed, 0xC0FFEE])
-    dt = 1.0 / scenario.loop.setpoint_rate_hz
-    limit = scenario.duration_s if duration_s is None else float(duration_s)
+    dt = 1.0 / config.loop.setpoint_rate_hz
+    limit = config.duration_s if duration_s is None else float(duration_s)
     dropped = 0
     goal_t: float | None = None
     # True state at each replan (campaign: per-step collision truth beside the estimates).
@@ -128,9 +141,9 @@ def run_lockstep(
                     break
         truth = sim.summary()
         return RunResult(
-            scenario=scenario.name,
+            scenario=config.name,
             seed=seed,
-            formulation=scenario.planner.formulation,
+            formulation=config.planner.formulation,
             truth=truth,
             companion=companion,
             sim_time_s=sim.time_s,
@@ -141,3 +154,11 @@ def run_lockstep(
     finally:
         link.close()
         sim.close()
+
+
+def _parse(data: Mapping[str, Any], planner_overrides: dict) -> tuple[CompanionScenario, Any]:
+    """Both programs' views of one parsed scenario (errors name the scenario's ``name``)."""
+    name = data.get("scenario", {}).get("name", "scenario")
+    source = f"<scenario {name}>"
+    return (scenario_from_dict(dict(data), source, **planner_overrides),
+            sim_scenario_from_dict(dict(data), source))

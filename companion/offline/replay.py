@@ -15,7 +15,8 @@ records with no inbound record between them, ended by its SET_POSITION_TARGET_LO
 (the last message of a streaming tick), and its time is the stamp of its first record.
 Ticks that sent nothing (the companion ticks at ``setpoint_rate_hz`` from its first tick
 on, and a tick that is not streaming and not due a HEARTBEAT sends nothing) are put back
-on the setpoint-rate grid between recorded ticks and after the last one up to the end of
+on the setpoint-rate grid between recorded ticks (never after a tick that sent a setpoint:
+a streaming companion sends one every tick) and after the last one up to the end of
 the log, each after the inbound records stamped up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
 
 *What-if* (no companion packets: mavsim's own ``--tlog``, a MAVProxy or QGroundControl
@@ -200,6 +201,9 @@ class AssumeEngaged:
     def on_home_altitude(self, alt_amsl_m: float) -> None:
         """Ignored."""
 
+    def on_goal_reached(self, t_s: float) -> None:
+        """Ignored."""
+
     def step(self, t_s: float) -> list:
         return []
 
@@ -380,6 +384,8 @@ def replay(
                 unmatched += sp is not None
         elif [m.get_type() for m in out] != [m.get_type() for m in ev.recorded]:
             mismatches += 1
+            logger.debug("tick at %.6f s: replayed %s, recorded %s", t, [m.get_type() for m in out],
+                         [m.get_type() for m in ev.recorded])
         rec_sp = ev.setpoint
         if sp is not None:
             v = _velocity(sp)
@@ -463,7 +469,10 @@ def _schedule(stream: list[tuple[bool, _Rec]], period_us: int) -> list:
     gaps = {}
     for a, b in zip(ticks, ticks[1:]):
         silent, t = deque(), a.t_us + period_us
-        while t < b.t_us - period_us // 2:
+        # a tick that sent a setpoint was streaming, and a streaming companion sends one every
+        # tick until a tick that stops it: no silent tick follows it. (A real-time loop late
+        # under load leaves gaps of more than a period; on the grid they would be extra ticks.)
+        while a.setpoint is None and t < b.t_us - period_us // 2:
             silent.append(t)
             t += period_us
         gaps[id(a)] = silent

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any, Mapping
 
 import matplotlib
 
@@ -14,15 +15,17 @@ import numpy as np  # noqa: E402
 logger = logging.getLogger(__name__)
 
 
-def plot_campaign(summary: dict, directory: str | Path, *, c_min: float, title: str = "campaign") -> list[Path]:
-    """Draw ``collision_rate.png`` and ``min_contour_ecdf.png`` into ``directory``.
+def plot_campaign(summary: Mapping[str, Any], directory: str | Path, *, c_min: float, title: str = "campaign") -> list[Path]:
+    """Draw ``collision_rate.png``, ``min_contour_ecdf.png`` and ``reliability.png`` into ``directory``.
 
     Parameters
     ----------
-    summary : dict
-        Per-method summaries (:func:`companion.offline.campaign.summarise`): ``collision_rate``,
-        ``collision_ci95``, ``episodes``, ``min_realised_contour`` (one value per episode,
-        ``None`` when no obstacle came within sensing range).
+    summary : mapping of method name to summary
+        Per-method summaries (``MethodSummary`` of :mod:`companion.offline.campaign.stats`,
+        read by attribute): ``collision_rate``, ``collision_ci95``, ``collisions``,
+        ``episodes``, ``min_realised_contour`` (one value per episode, ``None`` when no
+        obstacle came within sensing range), ``reliability`` (bins with ``pairs``, ``hits``,
+        ``promised_mean``, ``observed``, ``observed_ci95``).
     directory : output folder (created).
     c_min : the contour of touch the constraint protects (drawn as a line).
     title : figure title prefix.
@@ -38,15 +41,15 @@ def plot_campaign(summary: dict, directory: str | Path, *, c_min: float, title: 
     written = []
 
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
-    rates = np.array([summary[m]["collision_rate"] or 0.0 for m in methods])
-    ci = np.array([summary[m]["collision_ci95"] for m in methods]).reshape(-1, 2)
+    rates = np.array([summary[m].collision_rate or 0.0 for m in methods])
+    ci = np.array([summary[m].collision_ci95 for m in methods]).reshape(-1, 2)
     x = np.arange(len(methods))
     ax.bar(x, rates, color="tab:blue", alpha=0.7)
     ax.errorbar(x, rates, yerr=[rates - ci[:, 0], ci[:, 1] - rates], fmt="none", ecolor="k", capsize=5,
                 label="95 % Clopper-Pearson")
     for xi, m in zip(x, methods):
         s = summary[m]
-        ax.annotate(f"{s['collisions']}/{s['episodes']}", (xi, ci[xi, 1]), textcoords="offset points", xytext=(0, 4),
+        ax.annotate(f"{s.collisions}/{s.episodes}", (xi, ci[xi, 1]), textcoords="offset points", xytext=(0, 4),
                     ha="center", fontsize=8)
     ax.set_xticks(x, methods)
     ax.set_ylabel("episodes with a collision")
@@ -62,7 +65,7 @@ def plot_campaign(summary: dict, directory: str | Path, *, c_min: float, title: 
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
     styles = ("-", "--", "-.", ":")
     for i, m in enumerate(methods):
-        values = np.sort([v for v in summary[m]["min_realised_contour"] if v is not None])
+        values = np.sort([v for v in summary[m].min_realised_contour if v is not None])
         if values.size:
             # ECDF, closed on the right at c = 1 (most episodes never come near: c = 1.0)
             x = np.concatenate([[0.0], values, [1.0]])
@@ -81,5 +84,53 @@ def plot_campaign(summary: dict, directory: str | Path, *, c_min: float, title: 
     fig.savefig(path, dpi=120)
     plt.close(fig)
     written.append(path)
+    written.append(_reliability(summary, directory / "reliability.png", title))
     logger.info("wrote %s", ", ".join(str(p) for p in written))
     return written
+
+
+def _reliability(summary: Mapping[str, Any], path: Path, title: str) -> Path:
+    """Promised collision probability per (step, obstacle) pair against the observed frequency.
+
+    Log-log; per bin of promised probability, the observed frequency with its 95 %
+    Clopper-Pearson interval; a bin with no hit is drawn at its upper limit (a downward
+    triangle): the truth allows at most that. Points under the diagonal keep the promise.
+    """
+    fig, ax = plt.subplots(figsize=(5.6, 4.6))
+    floor, top = 1e-7, 1.0
+    markers = ("o", "s", "D", "^")
+    n_methods = max(len(summary), 1)
+    for i, (m, s) in enumerate(summary.items()):
+        bins = [b for b in s.reliability if b.pairs > 0]
+        if not bins:
+            continue
+        shift = 10 ** (0.06 * (i - (n_methods - 1) / 2))  # side by side within a bin
+        x = np.array([max(b.promised_mean, floor) for b in bins]) * shift
+        lo = np.array([b.observed_ci95[0] for b in bins])
+        hi = np.array([b.observed_ci95[1] for b in bins])
+        obs = np.array([b.observed for b in bins])
+        hit = obs > 0
+        color = f"C{i}"
+        if hit.any():
+            ax.errorbar(x[hit], obs[hit], yerr=[obs[hit] - np.maximum(lo[hit], floor), hi[hit] - obs[hit]],
+                        fmt=markers[i % len(markers)], color=color, capsize=3, label=f"{m}")
+        if (~hit).any():
+            ax.plot(x[~hit], hi[~hit], "v", color=color, alpha=0.7,
+                    label=f"{m}: no hit (95 % upper limit)")
+        ratio = s.observed_over_promised
+        if ratio is not None:
+            ax.annotate(f"{m}: observed/promised = {ratio:.2g}", (0.02, 0.97 - 0.06 * i), xycoords="axes fraction",
+                        fontsize=7, va="top", color=color)
+    ax.plot([floor, 0.5], [floor, 0.5], "k--", linewidth=0.8, label="promise kept exactly")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlim(floor, top)
+    ax.set_ylim(floor, top)
+    ax.set_xlabel("promised collision probability Phi(-r(c)) per (step, obstacle)")
+    ax.set_ylabel("observed collision frequency")
+    ax.set_title(f"{title}: promise against truth", fontsize=9)
+    ax.legend(loc="lower right", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

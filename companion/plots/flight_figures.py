@@ -26,9 +26,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.patches import Circle, Ellipse  # noqa: E402
+from matplotlib.patches import Circle  # noqa: E402
 
-from companion.core.overlap import touch_radius  # noqa: E402
+from companion.plots.ellipses import top_view_patch  # noqa: E402
 
 logger = logging.getLogger(__name__)
 
@@ -40,36 +40,6 @@ def _track_label(key) -> str:
     if isinstance(key, tuple) and len(key) == 2:
         return f"obstacle sys {key[0]}"
     return f"obstacle {key}"
-
-
-def slice_ellipse(cov: np.ndarray, confidence: float) -> tuple[float, float, float]:
-    """Horizontal slice through the centre of a 3-D Gaussian's confidence ellipsoid.
-
-    The ellipsoid ``d' S^-1 d <= r^2`` with ``r = touch_radius(confidence, 3)`` (the
-    contour the planner keeps apart) cut by the horizontal plane through its centre is
-    the ellipse ``[dx dy] A [dx dy]' <= r^2`` with ``A`` the north-east block of ``S^-1``.
-    (This is the planar slice, not the shadow of the 2-D marginal, which uses the block of
-    ``S`` itself and is larger when north/east correlate with down.)
-
-    Parameters
-    ----------
-    cov : (3, 3) position covariance, NED, m^2.
-    confidence : the contour, e.g. ``c_min``.
-
-    Returns
-    -------
-    width_east, height_north, angle_deg : full axis lengths (m) along east and north
-        before rotation, and the rotation (degrees counter-clockwise from east) for a
-        plot with east on the horizontal axis and north on the vertical.
-    """
-    r = float(touch_radius(confidence, 3))
-    a_ne = np.linalg.inv(np.asarray(cov, dtype=float))[:2, :2]
-    # Plot coordinates (east, north) = (y, x): swap the NED block.
-    a_plot = a_ne[::-1, ::-1]
-    evals, evecs = np.linalg.eigh(a_plot)
-    semi = r / np.sqrt(np.maximum(evals, 1e-300))
-    angle = math.degrees(math.atan2(evecs[1, 0], evecs[0, 0]))
-    return 2.0 * semi[0], 2.0 * semi[1], angle
 
 
 def write_flight_figures(companion, out_dir: str | Path, truth: dict | None = None, *, prefix: str = "") -> list[Path]:
@@ -163,8 +133,7 @@ def _topview(companion, records, truth):
         c = np.asarray(s.center, dtype=float)
         pts.append(c[None, :])
         ax.add_patch(Circle((c[1], c[0]), s.radius, color="0.4", alpha=0.5))
-        w, h, ang = slice_ellipse(s.covariance, cfg.c_min)
-        ax.add_patch(Ellipse((c[1], c[0]), w, h, angle=ang, fill=False, ec="0.2", lw=0.8, ls="--"))
+        ax.add_patch(top_view_patch(c, s.covariance, cfg.c_min, fill=False, ec="0.2", lw=0.8, ls="--"))
     r_drone = float(getattr(cfg, "drone_radius_m", 0.0))
     r_obs = float(getattr(getattr(companion, "loop", None), "obstacle_radius_m", 0.0))
     for j in _instants(records):
@@ -174,8 +143,7 @@ def _topview(companion, records, truth):
             + [(rec.obstacle_positions[key], rec.obstacle_covs[key], r_obs, colors[(i + 1) % len(colors)])
                for i, key in enumerate(_tracks(records)) if key in rec.obstacle_positions]
         ):
-            w, h, ang = slice_ellipse(cov, cfg.c_min)
-            ax.add_patch(Ellipse((pos[1], pos[0]), w, h, angle=ang, fill=True, fc=c, alpha=0.25, ec=c, lw=0.8))
+            ax.add_patch(top_view_patch(pos, cov, cfg.c_min, fill=True, fc=c, alpha=0.25, ec=c, lw=0.8))
             ax.add_patch(Circle((pos[1], pos[0]), radius, fill=False, ec=c, lw=0.6, ls=":"))
         pos = rec.drone_position
         ax.annotate(f"t={rec.t_link_s:.1f}s", (pos[1], pos[0]), xytext=(4, 4), textcoords="offset points", fontsize=7)

@@ -17,21 +17,12 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.patches import Circle, Ellipse  # noqa: E402
+from matplotlib.patches import Circle  # noqa: E402
 
-from companion.core.overlap import touch_radius  # noqa: E402
 from companion.core.planner import Plan, PlannerConfig, PlanRequest  # noqa: E402
+from companion.plots.ellipses import top_view_patch  # noqa: E402
 
 logger = logging.getLogger(__name__)
-
-
-def _ellipse(center_ne: np.ndarray, cov_ne: np.ndarray, radius: float, **kw) -> Ellipse:
-    """Ellipse ``(x - c)' S^-1 (x - c) = r^2`` drawn with east on the horizontal axis."""
-    vals, vecs = np.linalg.eigh(cov_ne)
-    # plot coordinates (east, north): swap the components
-    angle = np.degrees(np.arctan2(vecs[0, 1], vecs[1, 1]))
-    return Ellipse((center_ne[1], center_ne[0]), 2 * radius * np.sqrt(vals[1]), 2 * radius * np.sqrt(vals[0]),
-                   angle=angle, **kw)
 
 
 def plot_plan(path: str | Path, request: PlanRequest, plan: Plan, config: PlannerConfig, title: str = "") -> Path:
@@ -55,21 +46,21 @@ def plot_plan(path: str | Path, request: PlanRequest, plan: Plan, config: Planne
     path.parent.mkdir(parents=True, exist_ok=True)
     n = request.horizon_steps
     t = config.step_s * np.arange(1, n + 1)
-    r_min = float(touch_radius(config.c_min, 3))
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
     ax = axes[0]
     drone = np.vstack([request.position, plan.positions])
     ax.plot(drone[:, 1], drone[:, 0], "o-", color="tab:blue", ms=3, label="drone")
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"][1:]
     for i in range(n):
-        ax.add_patch(_ellipse(plan.positions[i, :2], request.drone_covs[i, :2, :2], r_min, fc="tab:blue", alpha=0.15))
+        ax.add_patch(top_view_patch(plan.positions[i], request.drone_covs[i], config.c_min, view="shadow",
+                                    fc="tab:blue", alpha=0.15))
     ax.add_patch(Circle((plan.positions[-1, 1], plan.positions[-1, 0]), config.drone_radius_m, fill=False, color="tab:blue"))
     for j in range(request.num_obstacles):
         c = colors[j % len(colors)]
         m = request.obstacle_means[j]
         ax.plot(m[:, 1], m[:, 0], "s--", color=c, ms=3, label=f"obstacle {j + 1}")
         for i in range(n):
-            ax.add_patch(_ellipse(m[i, :2], request.obstacle_covs[j, i, :2, :2], r_min, fc=c, alpha=0.12))
+            ax.add_patch(top_view_patch(m[i], request.obstacle_covs[j, i], config.c_min, view="shadow", fc=c, alpha=0.12))
         k = int(np.argmin(plan.contour_of_touch[j]))
         ax.add_patch(Circle((m[k, 1], m[k, 0]), request.obstacle_radii[j], fill=False, color=c))
         ax.add_patch(Circle((plan.positions[k, 1], plan.positions[k, 0]), config.drone_radius_m, fill=False,

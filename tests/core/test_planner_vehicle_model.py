@@ -89,3 +89,88 @@ def test_that_with_lag_the_commands_stay_within_the_speed_bound():
     assert np.all(np.abs(plan.commands) <= cfg.velocity_max)           # ...without commanding past it
     lag = LagModel.from_time_constant(tau, 0.3)                        # (clipped by at most the tolerance)
     np.testing.assert_allclose(plan.commands, lag.commands(req.velocity, plan.velocities), atol=1e-3)
+
+
+# ---------------------------------------------------------------- the PI-loop response (PX4)
+from companion.core.planner.vehicle_model import AxisResponse, ResponseModel  # noqa: E402
+
+PX4_LIKE = (AxisResponse(1.5, 0.33, 0.8, 0.22), AxisResponse(3.2, 0.14, 0.5, 0.02))
+
+
+def _simulate_response(p0, v0, commands, step_s, axes, substeps=600):
+    """Euler-integrated PI loop + acceleration lag + drag, from the steady state at ``v0``."""
+    dt = step_s / substeps
+    positions, velocities = [], []
+    p, v = np.array(p0, dtype=float), np.array(v0, dtype=float)
+    kp, ki, k, ta = (np.array([getattr(axes[i], f) for i in (0, 0, 1)]) for f in AxisResponse.FIELDS)
+    xi, a = np.where(ki > 0, k * v / np.where(ki > 0, ki, 1.0), 0.0), k * v
+    for u in commands:
+        for _ in range(substeps):
+            e = u - v
+            a_sp = kp * e + ki * xi
+            a = np.where(ta > 0, a + dt * (a_sp - a) / np.where(ta > 0, ta, 1.0), a_sp)
+            v_next = v + dt * (a - k * v)
+            p = p + 0.5 * dt * (v + v_next)
+            v, xi = v_next, xi + dt * e
+        positions.append(p.copy())
+        velocities.append(v.copy())
+    return np.array(positions), np.array(velocities)
+
+
+def test_that_the_response_model_predicts_what_an_integrated_pi_loop_vehicle_flies():
+    rng = np.random.default_rng(3)
+    model = ResponseModel(0.3, *PX4_LIKE)
+    p0, v0 = rng.normal(size=3), rng.normal(size=3)
+    commands = rng.normal(size=(8, 3))
+    positions, velocities = _simulate_response(p0, v0, commands, 0.3, PX4_LIKE)
+    np.testing.assert_allclose(model.positions(p0, v0, commands), positions, atol=5e-3)
+    np.testing.assert_allclose(model.simulate(v0, commands)[1], velocities, atol=5e-3)
+    np.testing.assert_allclose(model.velocity_at(v0, commands, 0.3 * 5), velocities[4], atol=5e-3)
+    # the increment form the QP uses gives the same positions
+    h, f = model.increment_coefficients(8), model.free_increments(v0, 8)
+    inc = f + np.array([sum(h[k] * commands[i - k] for k in range(i + 1)) for i in range(8)])
+    np.testing.assert_allclose(p0 + np.cumsum(inc, axis=0), model.positions(p0, v0, commands), atol=1e-12)
+
+
+def test_that_a_first_order_response_flies_like_the_lag_it_is():
+    """K_p = 1/T alone is the lag: the same commands give the same positions as LagModel."""
+    lag = LagModel.from_time_constant(0.3, 0.4)
+    model = ResponseModel(0.3, AxisResponse(1 / 0.4), AxisResponse(1 / 0.4))
+    rng = np.random.default_rng(5)
+    v0, velocities = rng.normal(size=3), rng.normal(size=(6, 3))
+    commands = lag.commands(v0, velocities)
+    np.testing.assert_allclose(model.positions(np.zeros(3), v0, commands),
+                               lag.positions(np.zeros(3), v0, velocities), atol=1e-9)
+
+
+def test_that_a_plan_with_the_response_model_obeys_it():
+    n, tau = 20, 0.3
+    cfg = PlannerConfig(horizon_steps=n, step_s=tau, vehicle_response=PX4_LIKE, accel_max_mps2=(1.0, 1.0, 1.0))
+    req = PlanRequest(position=np.zeros(3), velocity=np.array([0.5, 0.0, 0.0]),
+                      drone_covs=np.broadcast_to(0.02 * np.eye(3), (n, 3, 3)), target=np.array([8.0, 2.0, -1.0]))
+    plan = Planner(cfg).solve(req)
+    assert plan.status == "optimal"
+    model = ResponseModel(tau, *PX4_LIKE)
+    np.testing.assert_allclose(plan.commands, plan.velocities, atol=1e-9)
+    np.testing.assert_allclose(plan.positions, model.positions(req.position, req.velocity, plan.commands), atol=1e-3)
+    flown, _ = _simulate_response(req.position, req.velocity, plan.commands, tau, PX4_LIKE, substeps=300)
+    np.testing.assert_allclose(flown, plan.positions, atol=1e-2)
+    assert np.linalg.norm(plan.positions[-1] - req.target) < np.linalg.norm(req.target)
+
+
+def test_that_a_bad_vehicle_response_table_names_the_key():
+    with pytest.raises(ConfigError, match=r"vehicle_response.horizontal: unknown key 'p_gain'"):
+        PlannerConfig(vehicle_response={"horizontal": {"p_gain": 1.0}, "vertical": {"p_gain_per_s": 2.0}})
+    with pytest.raises(ConfigError, match=r"vehicle_response.vertical.drag_per_s = -1"):
+        PlannerConfig(vehicle_response={"horizontal": {"p_gain_per_s": 1.0},
+                                        "vertical": {"p_gain_per_s": 2.0, "drag_per_s": -1}})
+
+
+def test_that_the_canonical_response_swaps_drag_and_acceleration_lag_without_changing_the_response():
+    slow_lag = AxisResponse(14.06, 2.9645, 6.737, 1.2538)      # what a fit may return
+    canon = slow_lag.canonical()
+    assert 1.0 / canon.accel_lag_s > canon.drag_per_s
+    assert canon.canonical() == canon
+    u = np.sin(np.linspace(0.0, 6.0, 40))[:, None] * np.ones(3)
+    a, b = ResponseModel(0.3, slow_lag, slow_lag), ResponseModel(0.3, canon, canon)
+    np.testing.assert_allclose(a.simulate(np.zeros(3), u)[1], b.simulate(np.zeros(3), u)[1], atol=1e-9)

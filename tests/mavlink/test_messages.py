@@ -269,3 +269,20 @@ def test_that_a_message_whose_fields_break_decoding_is_rejected_not_raised():
     assert isinstance(out, M.Rejected) and "21" in out.reason
     msg.frame_id = None
     assert isinstance(M.decode(msg), M.Rejected)
+
+
+def test_that_a_position_velocity_setpoint_uses_both_and_ignores_acceleration_and_yaw():
+    from companion.mavlink.messages import TYPE_MASK_POSITION_VELOCITY, position_velocity_setpoint
+
+    msg = position_velocity_setpoint(1234, [1.0, 2.0, -5.0], [0.5, -0.25, 0.0], target_system=1, target_component=1)
+    assert msg.type_mask == TYPE_MASK_POSITION_VELOCITY == 3520
+    assert (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz) == (1.0, 2.0, -5.0, 0.5, -0.25, 0.0)
+    assert msg.coordinate_frame == 1 and msg.time_boot_ms == 1234
+
+
+def test_that_a_non_finite_position_velocity_setpoint_is_refused():
+    from companion.errors import InputError
+    from companion.mavlink.messages import position_velocity_setpoint
+
+    with pytest.raises(InputError, match="position \\+ velocity setpoint"):
+        position_velocity_setpoint(0, [float("nan"), 0.0, 0.0], [0.0, 0.0, 0.0])

@@ -226,18 +226,55 @@ def test_that_takeoff_waits_for_auto_loiter_before_prestreaming():
     assert s.run(0.5, vehicle).phase is Phase.PRESTREAM
 
 
-def test_that_takeoff_without_home_altitude_lets_px4_choose():
-    s = Script(OffboardConfig(takeoff_alt_m=2.5), armed=True)
+def test_that_takeoff_waits_for_home_position_and_requests_it_until_it_comes():
+    s = Script(OffboardConfig(takeoff_alt_m=5.0, retry_period_s=1.0), armed=True)
+    s.run(3.0)
+    assert s.seq.phase is Phase.TAKEOFF
+    requests = [m for _, m in s.sent]
+    assert [m.command for m in requests] == [512, 512, 512] and all(m.param1 == 242 for m in requests)
+    s.seq.on_home_altitude(488.0)
     s.run(0.1)
-    (_, to), = s.sent
-    assert to.command == 22 and math.isnan(to.param7)
-    assert any("MIS_TAKEOFF_ALT" in e.text for e in s.seq.events)
+    (to,) = [m for _, m in s.sent if m.command == 22]
+    assert to.param7 == pytest.approx(493.0)
+    assert any("waiting for HOME_POSITION" in e.text for e in s.seq.events)
+
+
+def test_that_takeoff_gives_up_without_home_position():
+    s = Script(OffboardConfig(takeoff_alt_m=2.5, takeoff_timeout_s=5.0), armed=True)
+    s.run(6.0)
+    assert s.seq.phase is Phase.GAVE_UP
+    assert not [m for _, m in s.sent if m.command == 22]
+    assert "no HOME_POSITION" in s.seq.state.reason
 
 
 def test_that_takeoff_times_out():
     s = Script(OffboardConfig(takeoff_alt_m=2.5, takeoff_timeout_s=5.0), armed=True)
+    s.seq.on_home_altitude(488.0)
     s.run(8.0, lambda s, m: s.seq.on_ack(s.t, ack(22, 0)))
     assert s.seq.phase is Phase.GAVE_UP and len(s.sent) == 1
+
+
+def test_that_handing_back_streams_until_the_heartbeat_shows_hold():
+    def vehicle(s, msg):
+        if msg.command == 176 and msg.param2 == 4 and msg.param3 == 3 and s.t >= 1.5:  # the first request is lost
+            s.mode = px4.AUTO_LOITER
+
+    s = Script(OffboardConfig(retry_period_s=1.0), mode=px4.OFFBOARD)
+    assert s.run(0.5).phase is Phase.ENGAGED
+    s.seq.hand_back(s.t)
+    state = s.run(1.5, vehicle)
+    assert state.phase is Phase.HANDING_BACK and state.streaming and not state.engaged
+    state = s.run(2.0, vehicle)
+    assert state.phase is Phase.HELD and not state.streaming
+    holds = [m for _, m in s.sent if m.command == 176]
+    assert len(holds) == 2 and (holds[0].param1, holds[0].param2, holds[0].param3) == (129.0, 4.0, 3.0)
+
+
+def test_that_hand_back_does_nothing_before_streaming():
+    s = Script(OffboardConfig(), armed=False)
+    s.run(0.5)
+    s.seq.hand_back(s.t)
+    assert s.seq.phase is Phase.WAIT_ARMED and s.sent == []
 
 
 def test_that_disarm_during_the_request_returns_to_waiting():

@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
+from companion.offline.campaign.reliability import PROMISE_EDGES, observed_over_promised, promise_bin
+from companion.offline.campaign.stats import reliability_bins
 from companion.offline.campaign import (
     FAMILIES,
     METHODS,
@@ -36,6 +38,7 @@ from companion.core.overlap import touch_radius
 from companion.loop.config import load_scenario as companion_load
 from mavsim.lockstep import LockstepSimulator
 from mavsim.scenario import load_scenario as mavsim_load
+from mavsim.scenario import scenario_from_dict as mavsim_load_dict
 
 SHORT_S = 12.0  # simulated seconds per run in the default suite: takeoff and the first encounter
 
@@ -98,6 +101,16 @@ def test_that_an_episode_is_drawn_from_its_seed_and_index_alone():
     assert episode_sim_seed(5, 3) == episode_sim_seed(5, 3) != episode_sim_seed(5, 4)
 
 
+def test_that_a_correlated_drone_error_is_opt_in_and_leaves_the_rest_of_the_episode_alone():
+    white = generate_scenario("crossing", 5, 3)
+    assert "position_noise_correlation_s" not in white["sim"]  # the default episode is the one of before
+    wandering = generate_scenario("crossing", 5, 3, drone_noise_correlation_s=2.0)
+    assert wandering["sim"].pop("position_noise_correlation_s") == 2.0 and wandering == white
+    assert mavsim_load_dict(generate_scenario("crossing", 5, 3, drone_noise_correlation_s=2.0)).sim.position_noise_correlation_s == 2.0
+    with pytest.raises(SystemExit):
+        main(["campaign", "--drone-noise-correlation", "-1"])
+
+
 def test_that_unknown_family_and_method_are_rejected():
     with pytest.raises(InputError, match="unknown campaign family 'ring'"):
         generate_scenario("ring", 0, 0)
@@ -134,6 +147,19 @@ def test_that_clopper_pearson_matches_known_intervals():
         clopper_pearson(3, 2)
 
 
+def test_that_a_reliability_bin_exceeds_its_promise_only_when_its_interval_lies_above_it():
+    # 1 hit in 5 pairs promised 2e-5 each: observed 0.2, interval [0.005, 0.72] above 2e-5 -> exceeds;
+    # no hit in 10 promised 1e-7: interval [0, 0.31] -> kept; 1 hit in 3 pairs promised 0.4: kept
+    bins = reliability_bins([10, 0, 5, 0, 0, 0, 3], [0, 0, 1, 0, 0, 0, 1], [1e-6, 0, 1e-4, 0, 0, 0, 1.2])
+    assert [b.exceeds_promise for b in bins] == [False, False, True, False, False, False, False]
+    assert bins[2].promised_mean == pytest.approx(2e-5) and bins[2].observed == 0.2
+    assert bins[2].observed_ci95 == pytest.approx(clopper_pearson(1, 5))
+    assert bins[1].pairs == 0 and bins[1].promised_mean is None and bins[1].observed is None
+    assert (bins[0].lo, bins[0].hi, bins[-1].hi) == (0.0, 1e-6, 0.5)
+    assert observed_over_promised(2, 1e-4 + 1e-6 + 1.2) == pytest.approx(2 / 1.200101)
+    assert observed_over_promised(0, 0.0) is None
+
+
 def test_that_the_bound_is_phi_of_minus_the_touch_radius():
     # SPEC section 2: c = 0.90 in 3-D -> r = 2.5003, Y = 0.0124, bound Phi(-r) = Y / 2
     assert collision_bound(0.90) == pytest.approx(0.0124 / 2, rel=2e-3)
@@ -141,7 +167,8 @@ def test_that_the_bound_is_phi_of_minus_the_touch_radius():
 
 def _record(t, drone, obstacles, contours, status="optimal"):
     drone = np.array(drone, float)
-    return SimpleNamespace(t_link_s=t, status=status, slack_max=0.0, solve_time_s=0.01, command=np.zeros(3),
+    return SimpleNamespace(t_link_s=t, status=status, slack_max=0.0 if status == "optimal" else 0.4, solve_time_s=0.01,
+                           command=np.zeros(3), planned_min_contour=min(contours.values()),
                            drone_position=drone, drone_cov=0.01 * np.eye(3), realised_contour=contours,
                            plan_positions=drone + np.array([[0.3, 0.0, 0.0]] * 28),
                            obstacle_positions={k: np.array(v, float) for k, v in obstacles.items()},
@@ -172,26 +199,37 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
     run = SimpleNamespace(truth={"collided": True, "collisions": contacts, "goal_reached": False},
                           companion=SimpleNamespace(records=records), extra={"replan_truth": truth_at}, sim_time_s=1.0)
     s = score_run(run, data)
-    assert s["steps"] == 3 and s["replans"] == 4
-    assert s["pair_steps_in_range"] == 1 + 2 + 2
-    assert s["pair_step_collisions"] == 1
-    assert s["contour_pairs"] == 5 and s["contour_pairs_below_c_min"] == 2 and s["steps_below_c_min"] == 2
-    assert s["min_realised_contour"] == 0.0
-    assert s["failed_plans"] == 1 and s["slack_plans"] == 1
+    assert s.steps == 3 and s.replans == 4
+    assert s.pair_steps_in_range == 1 + 2 + 2
+    assert s.pair_step_collisions == 1
+    assert s.contour_pairs == 5 and s.contour_pairs_below_c_min == 2 and s.steps_below_c_min == 2
+    assert s.min_realised_contour == 0.0
+    assert s.failed_plans == 1 and s.slack_plans == 1
+    # the slack replan (0.3 s) started with a 0.2 contour against c_min = 0.9 (b, at 0.95, is outside c_min);
+    # in metres: r_min (0.1 + 0.1) + (0.5 + 0.5 assumed) - 0.9 along the normal (north)
+    assert s.slack_violation_contour == pytest.approx(0.7)
+    assert s.slack_violation_m == pytest.approx(touch_radius(0.9, 3) * 0.2 + 0.1)
     # near pairs (contour < 0.99): a@0.3 (hit), b@0.3, a@0.6, b@0.6 (0.85 m >= 0.8 m: miss)
-    assert s["active_pairs"] == 4 and s["active_pair_collisions"] == 1
+    assert s.active_pairs == 4 and s.active_pair_collisions == 1
     # Phi(-r(c)) summed over the in-range pairs; c = 1.0 contributes nothing
     # (c = 0: the inflated ellipsoids overlap, Phi(0) = 1/2)
     expected = sum(float(norm.cdf(-touch_radius(c, 3))) for c in (0.99, 0.2, 0.95, 0.95)) + 0.5
-    assert s["predicted_collisions_bound"] == pytest.approx(expected)
+    assert s.predicted_collisions_bound == pytest.approx(expected)
+    # the same five promises, binned by decade of Phi(-r(c)), with the one hit (a at 0.3 s, c = 0.2)
+    promises = [float(norm.cdf(-touch_radius(c, 3))) for c in (0.99, 0.2, 0.95, 0.95)] + [0.5]
+    assert sum(s.promise_pairs) == 5 and sum(s.promise_hits) == 1
+    assert s.promise_hits[promise_bin(promises[1])] == 1
+    assert sum(s.promise_sum) == pytest.approx(expected)
+    for p in promises:
+        assert PROMISE_EDGES[promise_bin(p)] <= p <= PROMISE_EDGES[promise_bin(p) + 1]
     # NEES e' (S_d + S_o)^-1 e of the relative position: errors 0, 0.05, 0, 0, 0.15 m over 0.02 m^2
-    assert s["relative_nees"] == pytest.approx([0.0, 0.05**2 / 0.02, 0.0, 0.0, 0.15**2 / 0.02])
-    assert s["drone_nees"] == [0.0, 0.0, 0.0]
+    assert s.relative_nees == pytest.approx([0.0, 0.05**2 / 0.02, 0.0, 0.0, 0.15**2 / 0.02])
+    assert s.drone_nees == [0.0, 0.0, 0.0]
     # the drone truly stood still while each plan moved it 0.3 m over the first step
-    assert s["model_step_error_m"] == pytest.approx([0.3, 0.3])
-    assert s["obstacle_collision"] and s["collided"] and s["collisions"] == 3
-    assert s["contact_time_s"] == pytest.approx(0.15 + 0.1)  # walls are not obstacles
-    assert s["pair_time_in_range_s"] == pytest.approx(5 * 0.3)
+    assert s.model_step_error_m == pytest.approx([0.3, 0.3])
+    assert s.obstacle_collision and s.collided and s.collisions == 3
+    assert s.contact_time_s == pytest.approx(0.15 + 0.1)  # walls are not obstacles
+    assert s.pair_time_in_range_s == pytest.approx(5 * 0.3)
 
 
 # --------------------------------------------------------------------------- closed loop
@@ -204,54 +242,58 @@ def tiny_campaign():
 
 def test_that_a_tiny_campaign_runs_and_reports_every_method(tiny_campaign, tmp_path):
     res = tiny_campaign
-    assert [(r["episode"], r["method"]) for r in res.results] == [(0, "hyperplane"), (0, "deterministic"), (1, "hyperplane"), (1, "deterministic")]
-    assert all("error" not in r for r in res.results)
+    assert [(r.episode, r.method) for r in res.results] == [(0, "hyperplane"), (0, "deterministic"), (1, "hyperplane"), (1, "deterministic")]
+    assert all(r.error is None and r.score is not None for r in res.results)
     for m in ("hyperplane", "deterministic"):
         s = res.summary[m]
-        assert s["episodes"] == 2 and s["errors"] == 0
-        assert s["collision_ci95"] == pytest.approx(clopper_pearson(s["collisions"], 2))
-        assert s["steps"] > 0 and s["solve_time_median_ms"] > 0
-        assert s["bound_phi_minus_r_min"] == pytest.approx(collision_bound(0.90))
+        assert s.episodes == 2 and s.errors == 0
+        assert s.collision_ci95 == pytest.approx(clopper_pearson(s.collisions, 2))
+        assert s.steps > 0 and s.solve_time_median_ms > 0
+        assert s.bound_phi_minus_r_min == pytest.approx(collision_bound(0.90))
     table = format_table(res)
     assert "hyperplane" in table and "deterministic" in table and "Phi(-r_min)" in table
     doc = json.loads(json.dumps(res.to_json(), allow_nan=False))  # strict JSON: no inf/NaN
     assert doc["summary"]["hyperplane"]["episodes"] == 2 and len(doc["results"]) == 4
     written = res.plot(tmp_path / "fig")
-    assert [p.name for p in written] == ["collision_rate.png", "min_contour_ecdf.png"]
+    assert [p.name for p in written] == ["collision_rate.png", "min_contour_ecdf.png", "reliability.png"]
     assert all(p.stat().st_size > 1000 for p in written)
 
 
 def test_that_rerunning_one_episode_by_index_gives_the_same_result(tiny_campaign):
     row = tiny_campaign.results[2]  # episode 1, hyperplane, flown inside the campaign
     again = run_episode(EpisodeTask("antipodal", 4, 1, "hyperplane", duration_s=SHORT_S))
-    assert again["truth"] == row["truth"]
-    assert again["commands_sha256"] == row["commands_sha256"]
-    assert again["sim_seed"] == row["sim_seed"] == episode_sim_seed(4, 1)
-    for key in ("steps", "pair_steps_in_range", "pair_step_collisions", "min_realised_contour", "replans"):
-        assert again[key] == row[key]
+    assert again.score.truth == row.score.truth
+    assert again.score.commands_sha256 == row.score.commands_sha256
+    assert again.sim_seed == row.sim_seed == episode_sim_seed(4, 1)
+    assert again.reproducible_json() == row.reproducible_json()  # every field but the host's timings
 
 
 def test_that_the_companion_only_learns_obstacles_over_mavlink(tmp_path):
     data = generate_scenario("crossing", 2, 0, duration_s=6.0)
     res = run_episode(EpisodeTask("crossing", 2, 0, "hyperplane", duration_s=6.0), keep_records=True)
-    run = res["run"]
+    run = res.run
     tracks = set(run.companion.tracker.keys())
     n = len(data["world"]["obstacles"])
     assert tracks == {(101 + i, 197) for i in range(n)}  # one MAVLink system per scripted obstacle
     assert len(run.extra["replan_truth"]) == len(run.companion.records)
-    with LockstepSimulator(data, seed=res["sim_seed"]) as sim:  # the dict itself also drives mavsim
+    with LockstepSimulator(data, seed=res.sim_seed) as sim:  # the dict itself also drives mavsim
         assert len(sim.truth.obstacle_positions_ned_m) == n
 
 
 def test_that_the_cli_reruns_one_episode_and_writes_json(tmp_path, capsys):
     out = tmp_path / "c.json"
+    saved = tmp_path / "ep3.toml"
     code = main(["campaign", "--family", "corridor", "--episode", "3", "--methods", "deterministic", "--seed", "9",
-                 "--workers", "1", "--duration", "6", "--json", str(out)])
+                 "--workers", "1", "--duration", "6", "--json", str(out), "--save-scenario", str(saved)])
     assert code == 0
     text = capsys.readouterr().out
     assert "deterministic" in text and "wrote" in text
     doc = json.loads(out.read_text())
     assert doc["episodes"] == [3] and doc["results"][0]["episode"] == 3 and doc["family"] == "corridor"
+    assert tomllib.loads(saved.read_text()) == generate_scenario("corridor", 9, 3, duration_s=6.0)
+    assert not (tmp_path / "c.jsonl").exists()  # one re-run episode writes no results file unless asked
+    assert main(["campaign", "--save-scenario", str(saved)]) == 2
+    assert "--save-scenario needs --episode" in capsys.readouterr().err
 
 
 # --------------------------------------------------------------------------- the real thing
@@ -269,11 +311,12 @@ def test_that_chance_constrained_methods_keep_their_promise_in_a_real_campaign()
     """
     res = run_campaign("antipodal", range(100, 140), list(METHODS), 1, workers=os.cpu_count(), progress=False)
     print(format_table(res))
-    assert res.summary["hyperplane"]["collisions"] == 0
+    assert res.summary["hyperplane"].collisions == 0
     for m in ("hyperplane", "paper"):
         s = res.summary[m]
-        assert s["errors"] == 0
-        hit_while_planning = [r["episode"] for r in res.results if r["method"] == m and r["collided"] and r["failed_plans"] == 0]
+        assert s.errors == 0
+        hit_while_planning = [r.episode for r in res.results
+                              if r.method == m and r.score.collided and r.score.failed_plans == 0]
         assert hit_while_planning == [], f"{m}: collision without a planner failure in episodes {hit_while_planning}"
-        assert s["pair_step_frequency"] <= s["bound_phi_minus_r_min"]
-    assert res.summary["deterministic"]["share_pairs_below_c_min"] > res.summary["hyperplane"]["share_pairs_below_c_min"]
+        assert s.pair_step_frequency <= s.bound_phi_minus_r_min
+    assert res.summary["deterministic"].share_pairs_below_c_min > res.summary["hyperplane"].share_pairs_below_c_min

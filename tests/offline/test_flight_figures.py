@@ -7,7 +7,8 @@ from companion.loop.app import Companion
 from companion.cli import main
 from companion.offline.harness import run_lockstep
 from companion.core.overlap import touch_radius
-from companion.plots.flight_figures import slice_ellipse, write_flight_figures
+from companion.plots.ellipses import slice_ellipse, top_view_ellipse
+from companion.plots.flight_figures import write_flight_figures
 from companion.loop.config import load_scenario
 
 SCENARIO = "configs/antipodal.toml"
@@ -79,3 +80,24 @@ def test_that_the_ellipse_is_the_horizontal_slice_of_the_correlated_ellipsoid():
         north = 0.5 * w * np.cos(s) * np.sin(th) + 0.5 * h * np.sin(s) * np.cos(th)
         d = np.array([north, east, 0.0])  # NED offset on the boundary, in the horizontal plane
         assert d @ inv @ d == pytest.approx(r**2, rel=1e-9)
+
+
+def test_that_the_shadow_ellipse_is_the_projection_of_the_correlated_ellipsoid():
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(3, 3))
+    cov = a @ a.T + 0.1 * np.eye(3)
+    r = touch_radius(0.9, 3)
+    w, h, angle = top_view_ellipse(cov, 0.9, view="shadow")
+    th = np.radians(angle)
+    for s in np.linspace(0, 2 * np.pi, 13):
+        # boundary point of the drawn ellipse and its outward normal, in (north, east)
+        east = 0.5 * w * np.cos(s) * np.cos(th) - 0.5 * h * np.sin(s) * np.sin(th)
+        north = 0.5 * w * np.cos(s) * np.sin(th) + 0.5 * h * np.sin(s) * np.cos(th)
+        n_ne = np.linalg.solve(cov[:2, :2], [north, east])
+        n = np.array([n_ne[0], n_ne[1], 0.0]) / np.linalg.norm(n_ne)
+        # the 3-D ellipsoid's support along a horizontal normal is r sqrt(n' S n): the shadow's edge
+        assert n[:2] @ [north, east] == pytest.approx(r * np.sqrt(n @ cov @ n), rel=1e-9)
+    ws, hs, _ = top_view_ellipse(cov, 0.9, view="slice")
+    assert ws * hs < w * h  # the slice lies inside the shadow
+    with pytest.raises(ValueError, match="view must be one of"):
+        top_view_ellipse(cov, 0.9, view="side")

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from companion.core.planner.vehicle_model import AxisResponse
 from companion.errors import ConfigError
 
 logger = logging.getLogger(__name__)
@@ -72,6 +73,19 @@ def _axis_vector(name: str, value: Any) -> tuple[float, float, float]:
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
+def _vehicle_response(value: Any) -> tuple[AxisResponse, AxisResponse]:
+    """``(horizontal, vertical)`` from a pair of AxisResponse or a table with those two keys."""
+    if isinstance(value, Mapping):
+        unknown = sorted(set(value) - {"horizontal", "vertical"})
+        if unknown or set(value) != {"horizontal", "vertical"}:
+            raise ConfigError(f"vehicle_response needs exactly the tables horizontal and vertical, got {sorted(value)}")
+        return tuple(v if isinstance(v, AxisResponse) else AxisResponse.from_mapping(v, f"vehicle_response.{k}")
+                     for k, v in ((k, value[k]) for k in ("horizontal", "vertical")))  # type: ignore[return-value]
+    if isinstance(value, tuple) and len(value) == 2 and all(isinstance(v, AxisResponse) for v in value):
+        return value
+    raise ConfigError(f"vehicle_response must be a table with horizontal and vertical, got {value!r}")
+
+
 def _confidence(name: str, value: Any) -> float:
     try:
         v = float(value)
@@ -115,6 +129,12 @@ class PlannerConfig:
         setpoint, seconds (:mod:`companion.core.planner.vehicle_model`). 0 (default) is the
         paper's model: the velocity follows the command at once. With ``T > 0`` the plan's
         velocities are the vehicle's and the streamed commands lead them.
+    vehicle_response : (AxisResponse, AxisResponse) or None
+        The vehicle's (horizontal, vertical) velocity response to a setpoint, e.g. identified
+        with ``companion identify`` (:class:`~companion.core.planner.vehicle_model.AxisResponse`).
+        When given it replaces ``velocity_time_constant_s`` and the plan's velocities are the
+        commands. In TOML: ``[planner.vehicle_response]`` with tables ``horizontal`` and
+        ``vertical`` of ``p_gain_per_s``, ``i_gain_per_s2``, ``drag_per_s``, ``accel_lag_s``.
     drone_radius_m : float
         Physical radius of the drone, metres.
     sensing_range_m : float
@@ -192,6 +212,7 @@ class PlannerConfig:
     velocity_max_mps: tuple[float, float, float] = (3.0, 3.0, 1.0)
     accel_max_mps2: tuple[float, float, float] = (0.5, 0.5, 0.5)
     velocity_time_constant_s: float = 0.0
+    vehicle_response: tuple[AxisResponse, AxisResponse] | None = None
     drone_radius_m: float = 0.5
     sensing_range_m: float = 10.0
     weight_terminal: float = 1.0
@@ -227,6 +248,8 @@ class PlannerConfig:
         set_("velocity_max_mps", _axis_vector("velocity_max_mps", self.velocity_max_mps))
         set_("accel_max_mps2", _axis_vector("accel_max_mps2", self.accel_max_mps2))
         set_("velocity_time_constant_s", _nonnegative("velocity_time_constant_s", self.velocity_time_constant_s))
+        if self.vehicle_response is not None:
+            set_("vehicle_response", _vehicle_response(self.vehicle_response))
         set_("drone_radius_m", _nonnegative("drone_radius_m", self.drone_radius_m))
         set_("sensing_range_m", _positive("sensing_range_m", self.sensing_range_m, allow_inf=True))
         set_("weight_terminal", _positive("weight_terminal", self.weight_terminal))

@@ -100,13 +100,15 @@ class RequestData:
         # bounds that do not depend on the iterate
         l = np.zeros(layout.m)
         u = np.zeros(layout.m)
-        dyn = np.zeros((N, 3))
-        dyn[0] = request.position + layout.lag.c * v0     # p_1 - b V_1 = p_0 + c V_0
+        dyn = layout.lag.free_increments(v0, N)           # p_1 - b V_1 = p_0 + c V_0 for the lag
+        dyn[0] += request.position
         l[layout.row["dyn"].slice] = u[layout.row["dyn"].slice] = dyn.ravel()
         acc = np.broadcast_to(amax * tau, (N, 3)).copy()
         lo_acc, hi_acc = -acc, acc.copy()
         lo_acc[0] += v0
         hi_acc[0] += v0
+        if not layout.lag.bounds_command_steps:       # a response model: the autopilot limits acceleration
+            lo_acc[:], hi_acc[:] = -np.inf, np.inf
         l[layout.row["accel"].slice], u[layout.row["accel"].slice] = lo_acc.ravel(), hi_acc.ravel()
         if layout.row["cmd"].size:          # commands within the speed bound: (1 - a) |u_i| <= (1 - a) v_max
             alpha = layout.lag.alpha

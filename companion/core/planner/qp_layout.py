@@ -14,8 +14,9 @@ Decision vector ``x`` (blocks in this order; ``i`` step 0..N-1, ``k`` axis, ``j`
 
 Constraint rows ``l <= A x <= u``::
 
-    dyn    (N, 3)   p_i - p_{i-1} - b V_i - c V_{i-1} = 0  (p_0, V_0 current -> l = u; b, c of
-                    :class:`~companion.core.planner.vehicle_model.LagModel`: b = tau, c = 0 without lag)
+    dyn    (N, 3)   p_i - p_{i-1} - sum_k h_k V_{i-k} = f_i v_0  (p_0, V_0 current -> l = u; h, f of the
+                    vehicle model, :mod:`companion.core.planner.vehicle_model`: the lag has h = (b, c),
+                    b = tau, c = 0 without lag; a :class:`ResponseModel` has N terms, V the commands)
     vbox   (N, 3)   V_i in [-v_max, v_max] ∩ trust region around the iterate
     accel  (N, 3)   V_i - V_{i-1} in [-a_max tau, a_max tau]   (V_0 = current velocity)
     cmd    (N, 3)   V_i - alpha V_{i-1} in (1 - alpha) [-v_max, v_max]: the command u_i within
@@ -47,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from companion.core.planner.vehicle_model import LagModel
+from companion.core.planner.vehicle_model import LagModel, VehicleModel
 
 logger = logging.getLogger(__name__)
 
@@ -105,15 +106,15 @@ class QpLayout:
         Whether the obstacle rows carry a ``c_max`` side (``s_hi`` block).
     step_s : float
         ``tau``, seconds (the step of the default ``lag``).
-    lag : LagModel, optional
-        The vehicle's velocity lag (``dyn`` coefficients ``b``, ``c``); default none
-        (``b = tau``, ``c = 0``).
+    lag : LagModel or ResponseModel, optional
+        The vehicle's velocity response (``dyn`` coefficients ``h_k``); default no lag
+        (``h_0 = tau``).
     slack_scale : float
         Coefficient ``1/rho`` of the slack columns in their rows.
     """
 
     def __init__(self, n_steps: int, n_obstacles: int, n_walls: int, *, paper: bool, upper: bool, step_s: float,
-                 lag: LagModel | None = None, slack_scale: float = 1.0) -> None:
+                 lag: VehicleModel | None = None, slack_scale: float = 1.0) -> None:
         N, P, W = n_steps, n_obstacles, n_walls
         self.N, self.P, self.W, self.paper, self.upper = N, P, W, paper, upper
         self.lag = lag if lag is not None else LagModel.from_time_constant(step_s, 0.0)
@@ -187,11 +188,13 @@ class QpLayout:
         later = np.arange(3, 3 * N)          # entries with a predecessor step
         # dyn: p_i - p_{i-1} - b V_i - c V_{i-1} = 0 (V_0 is data: it goes to the bounds)
         r0 = self.row["dyn"].start
+        # and, with a richer vehicle response, - h_k V_{i-k} for every earlier command (a fixed
+        # lower-triangular band per axis; the lag has h_0 = b, h_1 = c)
         add(None, r0 + e3, p + e3, 1.0)
         add(None, r0 + later, p + later - 3, -1.0)
-        add(None, r0 + e3, V + e3, -self.lag.b)
-        if self.lag.c != 0.0:
-            add(None, r0 + later, V + later - 3, -self.lag.c)
+        for k, h in enumerate(self.lag.increment_coefficients(N)[:N]):
+            if k == 0 or np.any(h != 0.0):
+                add(None, r0 + e3[3 * k:], V + e3[:3 * (N - k)], -np.tile(h, N - k))
         # vbox: V_i
         add(None, self.row["vbox"].start + e3, V + e3, 1.0)
         # accel: V_i - V_{i-1}

@@ -46,7 +46,7 @@ from companion.core.planner.qp_data import RequestData
 from companion.core.planner.qp_layout import QpLayout
 from companion.core.planner.qp_step import SLACK_TOL, QpStep, QpWorkspace, solve_qp
 from companion.core.planner.request import Plan, PlanRequest
-from companion.core.planner.vehicle_model import LagModel
+from companion.core.planner.vehicle_model import model_from_config
 from companion.errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -99,7 +99,7 @@ class Planner:
         self.r_max = None if config.c_max is None else float(overlap.touch_radius(config.c_max, 3))
         self.formulation: Formulation = make_formulation(config.formulation, self.r_min, self.r_max,
                                                          config.drone_radius_m)
-        self.lag = LagModel.from_time_constant(config.step_s, config.velocity_time_constant_s)
+        self.lag = model_from_config(config.step_s, config.velocity_time_constant_s, config.vehicle_response)
         self._workspaces: dict[tuple[int, int, int], QpWorkspace] = {}
 
     # ------------------------------------------------------------------ public API

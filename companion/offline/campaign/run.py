@@ -1,0 +1,170 @@
+"""Flying a campaign: each (episode, method) run in lockstep, on a local process pool or a Dask cluster.
+
+A run is a pure function of ``(family, seed, index, method, c_min, duration_s)``
+(:class:`EpisodeTask`): the encounter and the simulator seed come from ``(seed, index)``,
+so a run gives the same result in this process, in a pool worker or on another machine
+(timing fields aside). Finished runs are appended to the results file as they complete
+(:mod:`companion.offline.campaign.store`).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Sequence
+
+from companion.errors import ConfigError, InputError, LinkError
+from companion.offline.campaign.generate import DEFAULT_DURATION_S, FAMILIES, METHODS, episode_sim_seed, generate_scenario
+from companion.offline.campaign.progress import Progress
+from companion.offline.campaign.results import CampaignResult, EpisodeResult
+from companion.offline.campaign.score import score_run
+from companion.offline.campaign.stats import summarise
+from companion.offline.campaign.store import ResultsFile, campaign_header
+from companion.offline.harness import run_lockstep  # imports mavsim (the harness exception of the dependency rule)
+
+logger = logging.getLogger(__name__)
+
+#: Simulated seconds a run goes on after the truth says the goal was reached.
+STOP_AFTER_GOAL_S = 0.5
+#: Seconds to wait for a Dask scheduler to answer.
+SCHEDULER_TIMEOUT_S = 20.0
+
+
+@dataclass(frozen=True)
+class EpisodeTask:
+    """One (episode, method) run of a campaign; picklable for the process pool and Dask."""
+
+    family: str
+    seed: int
+    index: int
+    method: str
+    c_min: float = 0.90
+    duration_s: float = DEFAULT_DURATION_S
+    drone_noise_correlation_s: float = 0.0
+
+
+def run_episode(task: EpisodeTask, *, keep_records: bool = False) -> EpisodeResult:
+    """Generate, fly and score one episode with one method; never raises (errors are reported).
+
+    With ``keep_records`` the :class:`~companion.offline.harness.RunResult` is kept in
+    :attr:`EpisodeResult.run`.
+    """
+    key = dict(episode=task.index, method=task.method, family=task.family, seed=task.seed,
+               sim_seed=episode_sim_seed(task.seed, task.index))
+    t0 = time.perf_counter()
+    try:
+        data = generate_scenario(task.family, task.seed, task.index, c_min=task.c_min, duration_s=task.duration_s,
+                                 drone_noise_correlation_s=task.drone_noise_correlation_s)
+        run = run_lockstep(data, seed=key["sim_seed"], stop_after_goal_s=STOP_AFTER_GOAL_S, formulation=task.method)
+        return EpisodeResult(**key, score=score_run(run, data), wall_time_s=time.perf_counter() - t0,
+                             run=run if keep_records else None)
+    except Exception as exc:  # one bad episode must not end a campaign of hundreds
+        logger.exception("episode %d method %s failed", task.index, task.method)
+        return EpisodeResult(**key, error=f"{type(exc).__name__}: {exc}", wall_time_s=time.perf_counter() - t0)
+
+
+@contextmanager
+def open_executor(workers: int, scheduler: str | None = None) -> Iterator[tuple[Executor | None, int]]:
+    """The executor that runs the episodes, and how many workers it has.
+
+    ``scheduler``: the address of a Dask distributed scheduler (``tcp://host:8786``); its
+    client's ``concurrent.futures`` executor runs the episodes on the cluster's workers
+    (which need only this package installed). Otherwise a local process pool of
+    ``workers`` processes, or none (this process) for one worker.
+
+    Raises
+    ------
+    ConfigError
+        ``scheduler`` is given but ``distributed`` is not installed.
+    LinkError
+        The scheduler does not answer within ``SCHEDULER_TIMEOUT_S``.
+    """
+    if scheduler:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise ConfigError("--scheduler needs Dask distributed: pip install 'ogccmpc[cluster]'") from None
+        try:
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S, set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            raise LinkError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+        try:
+            n = len(client.scheduler_info().get("workers", {}))
+            logger.info("Dask scheduler %s: %d worker(s)", scheduler, n)
+            yield client.get_executor(pure=False), n
+        finally:
+            client.close()
+    elif workers == 1:
+        yield None, 1
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            yield pool, workers
+
+
+def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], seed: int, *,
+                 workers: int | None = None, c_min: float = 0.90, duration_s: float = DEFAULT_DURATION_S,
+                 progress: bool | str | None = None, results_path: str | Path | None = None, resume: bool = False,
+                 scheduler: str | None = None, drone_noise_correlation_s: float = 0.0) -> CampaignResult:
+    """Fly ``episodes`` (indices) of a ``family`` campaign with every method.
+
+    Parameters
+    ----------
+    workers : local processes (default: CPU count); ignored with ``scheduler``.
+    progress : ``"bar"``, ``"log"``, ``"off"`` or ``"auto"`` (see
+        :class:`~companion.offline.campaign.progress.Progress`); ``None`` or ``True``: ``"auto"``,
+        ``False``: ``"off"``.
+    results_path : append every finished run to this JSON-lines file; the result is then
+        computed from the file. ``resume`` continues a file that already holds runs and
+        runs only the missing ones.
+    scheduler : address of a Dask distributed scheduler to run the episodes on.
+    drone_noise_correlation_s : correlation time of mavsim's drone position error (s; 0: white).
+    """
+    if family not in FAMILIES:
+        raise InputError(f"unknown campaign family {family!r} (known: {', '.join(FAMILIES)})")
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown or not methods:
+        raise InputError(f"unknown method(s) {', '.join(unknown) or '(none given)'} (known: {', '.join(METHODS)})")
+    episodes, methods = tuple(episodes), tuple(methods)
+    workers = workers or os.cpu_count() or 1
+    keys = [(i, m) for i in episodes for m in methods]
+    store = (ResultsFile(results_path, campaign_header(family, seed, c_min, duration_s, drone_noise_correlation_s), resume=resume)
+             if results_path is not None else None)
+    in_memory: dict[tuple[int, str], EpisodeResult] = {}
+    todo = [EpisodeTask(family, seed, i, m, c_min, duration_s, drone_noise_correlation_s) for i, m in keys if store is None or (i, m) not in store]
+    mode = "auto" if progress is None or progress is True else ("off" if progress is False else progress)
+    bar = Progress(f"campaign {family}", len(keys), len(keys) - len(todo), mode=mode)
+    t0 = time.perf_counter()
+    lost = 0
+
+    def finished(result: EpisodeResult) -> None:
+        if store is not None:
+            store.append(result)
+        in_memory[result.key] = result
+        bar.update(result)
+
+    try:
+        with open_executor(workers, scheduler) as (executor, n_workers):
+            if executor is None:
+                for task in todo:
+                    finished(run_episode(task))
+            else:
+                futures: dict[Future, EpisodeTask] = {executor.submit(run_episode, task): task for task in todo}
+                for fut in as_completed(futures):
+                    try:
+                        finished(fut.result())
+                    except Exception as exc:  # the worker died (run_episode itself never raises)
+                        task = futures[fut]
+                        lost += 1
+                        logger.error("episode %d method %s lost: %s: %s", task.index, task.method, type(exc).__name__, exc)
+    finally:
+        bar.close()
+        if store is not None:
+            store.close()
+    results = store.results(keys) if store is not None else [in_memory[k] for k in keys if k in in_memory]
+    return CampaignResult(family, seed, episodes, methods, c_min, duration_s, tuple(results),
+                          summarise(results, methods, c_min), time.perf_counter() - t0, n_workers, lost)

@@ -1,0 +1,138 @@
+"""The results file: every finished (episode, method) run appended as one JSON line, flushed.
+
+An interrupted campaign loses at most the runs in flight: ``--resume`` reads the file,
+skips the runs already in it and appends the rest; the summary, table and figures are
+computed from the file. The first line is a header naming what the rows depend on
+(family, seed, ``c_min``, episode duration); resuming with different values is refused.
+Methods and episode indices may differ between sessions: a campaign can be extended.
+
+Format (one JSON object per line)::
+
+    {"format": "ogccmpc-campaign-results", "version": 3, "family": ..., "seed": ..., "c_min": ..., "duration_s": ...}
+    {"episode": 0, "method": "hyperplane", ..., "wall_time_s": 4.2}
+    ...
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from pathlib import Path
+from typing import Any, Iterable
+
+from companion.errors import ConfigError
+from companion.offline.campaign.results import EpisodeResult
+
+logger = logging.getLogger(__name__)
+
+FORMAT = "ogccmpc-campaign-results"
+VERSION = 3  # 2: slack violation fields in the rows; 3: promise bins
+#: A row longer than this is not one the campaign wrote (bounded reads of a file given on the command line).
+MAX_LINE_BYTES = 16 * 1024 * 1024
+
+
+def campaign_header(family: str, seed: int, c_min: float, duration_s: float,
+                    drone_noise_correlation_s: float = 0.0) -> dict[str, Any]:
+    """The header line: what every row of the file depends on."""
+    return {"format": FORMAT, "version": VERSION, "family": family, "seed": int(seed),
+            "c_min": float(c_min), "duration_s": float(duration_s),
+            "drone_noise_correlation_s": float(drone_noise_correlation_s)}
+
+
+class ResultsFile:
+    """An open results file, appending one line per finished run.
+
+    Parameters
+    ----------
+    path : the JSON-lines file (created with its parent folder when missing).
+    header : :func:`campaign_header` of this campaign.
+    resume : continue a file that already holds results; without it such a file is refused
+        (``ConfigError``), so that hours of results are never overwritten by mistake.
+
+    Raises
+    ------
+    ConfigError
+        The file holds results and ``resume`` is false; its header differs from ``header``;
+        a line (other than an unfinished last one) is not a result row.
+    """
+
+    def __init__(self, path: str | Path, header: dict[str, Any], *, resume: bool = False) -> None:
+        self.path = Path(path)
+        self.header = header
+        self._rows: dict[tuple[int, str], EpisodeResult] = {}
+        existing = self.path.exists() and self.path.stat().st_size > 0
+        if existing and not resume:
+            raise ConfigError(f"{self.path}: already holds campaign results; pass --resume to continue it, "
+                              f"or name another --results file")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if existing:
+            good_bytes = self._read()
+            with self.path.open("r+b") as f:  # drop an unfinished last line (killed mid-write)
+                f.truncate(good_bytes)
+            self._file = self.path.open("a", encoding="utf-8")
+        else:
+            self._file = self.path.open("w", encoding="utf-8")
+            self._write(header)
+        logger.info("%s: %d run(s) already there", self.path, len(self._rows))
+
+    def _read(self) -> int:
+        """Load the rows; returns the length in bytes of the complete lines."""
+        good = 0
+        with self.path.open("rb") as f:
+            for number, raw in enumerate(iter(lambda: f.readline(MAX_LINE_BYTES), b""), start=1):
+                if not raw.endswith(b"\n"):
+                    if len(raw) >= MAX_LINE_BYTES:
+                        raise ConfigError(f"{self.path}:{number}: line longer than {MAX_LINE_BYTES} bytes: not a results file")
+                    logger.warning("%s:%d: unfinished last line dropped (the campaign was interrupted)", self.path, number)
+                    break
+                try:
+                    doc = json.loads(raw)
+                except ValueError:
+                    raise ConfigError(f"{self.path}:{number}: not a JSON line") from None
+                if number == 1:
+                    self._check_header(doc)
+                else:
+                    try:
+                        result = EpisodeResult.from_json(doc)
+                    except (KeyError, TypeError, ValueError) as exc:
+                        raise ConfigError(f"{self.path}:{number}: not a campaign result row ({exc})") from None
+                    self._rows[result.key] = result
+                good += len(raw)
+        return good
+
+    def _check_header(self, doc: Any) -> None:
+        if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+            raise ConfigError(f"{self.path}:1: not a campaign results file (no {FORMAT!r} header)")
+        for key, value in self.header.items():
+            if doc.get(key) != value:
+                raise ConfigError(f"{self.path}: was written for {key} = {doc.get(key)!r}, this campaign has {value!r}")
+
+    def _write(self, doc: dict) -> None:
+        self._file.write(json.dumps(doc, default=float, allow_nan=False) + "\n")
+        self._file.flush()
+        os.fsync(self._file.fileno())
+
+    def __contains__(self, key: tuple[int, str]) -> bool:
+        return key in self._rows
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def append(self, result: EpisodeResult) -> None:
+        """Append one finished run (flushed to disk before returning)."""
+        self._write(result.to_json(pooled=True))
+        self._rows[result.key] = EpisodeResult.from_json(result.to_json(pooled=True))
+
+    def results(self, keys: Iterable[tuple[int, str]]) -> list[EpisodeResult]:
+        """The rows for ``keys`` that the file holds, in the order of ``keys``."""
+        return [self._rows[k] for k in keys if k in self._rows]
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> "ResultsFile":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,77 @@
+"""The drone's reported position error: white by default, Gauss-Markov when asked, honest either way.
+
+Honest: the covariance ODOMETRY reports is the error's covariance, so the NEES of the
+reported position against the truth averages 3 (chi2_3), correlated or not.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from mavsim.lockstep import LockstepSimulator
+from mavsim.noise import GaussMarkovError
+from mavsim.obstacles import noise_factor
+from mavsim.scenario import ScenarioError, scenario_from_dict
+
+P = np.array([[0.04, 0.01, 0.0], [0.01, 0.02, 0.005], [0.0, 0.005, 0.03]])  # m^2, correlated axes
+
+
+def _lag1(e: np.ndarray) -> float:
+    return float(np.mean([np.corrcoef(e[:-1, k], e[1:, k])[0, 1] for k in range(3)]))
+
+
+def test_that_the_gauss_markov_error_keeps_its_covariance_and_correlates_as_exp_of_minus_dt_over_tau():
+    rng = np.random.default_rng(7)
+    dt_us, tau = 20_000, 0.5
+    gm = GaussMarkovError(noise_factor(P), tau)
+    e = np.array([gm.sample(k * dt_us, rng.standard_normal(3)).copy() for k in range(40_000)])  # 800 s
+    assert np.cov(e.T) == pytest.approx(P, abs=0.2 * P.max())
+    assert _lag1(e) == pytest.approx(math.exp(-0.02 / tau), abs=0.02)
+    nees = np.einsum("ij,jk,ik->i", e, np.linalg.inv(P), e)
+    assert nees.mean() == pytest.approx(3.0, abs=0.4)
+
+
+def test_that_a_zero_correlation_time_is_the_white_noise_of_before():
+    rng = np.random.default_rng(8)
+    gm = GaussMarkovError(noise_factor(P), 0.0)
+    for k in range(5):
+        w = rng.standard_normal(3)
+        assert np.array_equal(gm.sample(k * 10_000, w), noise_factor(P) @ w)
+    with pytest.raises(ValueError, match="correlation time"):
+        GaussMarkovError(noise_factor(P), -1.0)
+
+
+def test_that_the_correlation_time_is_a_checked_sim_key():
+    assert scenario_from_dict({}).sim.position_noise_correlation_s == 0.0
+    assert scenario_from_dict({"sim": {"position_noise_correlation_s": 2.5}}).sim.position_noise_correlation_s == 2.5
+    with pytest.raises(ScenarioError, match="position_noise_correlation_s"):
+        scenario_from_dict({"sim": {"position_noise_correlation_s": -1.0}})
+
+
+def test_that_odometry_reports_a_correlated_error_with_its_true_covariance():
+    tau, seconds = 0.3, 60.0
+    scenario = {"vehicle": {"start_ned_m": [0.0, 0.0, -5.0]},
+                "sim": {"position_noise_cov_m2": P.tolist(), "position_noise_correlation_s": tau}}
+    parser = mavlink2.MAVLink(None)
+    errors, nees = [], []
+    with LockstepSimulator(scenario, seed=3) as sim:
+        truth = sim.truth.drone_position_ned_m.copy()  # hovering in AUTO.LOITER: the truth stands still
+        for _ in range(int(seconds / 0.1)):
+            for _, packet in sim.advance(0.1):
+                for msg in parser.parse_buffer(packet) or []:
+                    if msg.get_type() != "ODOMETRY":
+                        continue
+                    e = np.array([msg.x, msg.y, msg.z]) - truth
+                    ut = msg.pose_covariance
+                    reported = np.array([[ut[0], ut[1], ut[2]], [ut[1], ut[6], ut[7]], [ut[2], ut[7], ut[11]]])
+                    errors.append(e)
+                    nees.append(float(e @ np.linalg.solve(reported, e)))
+        assert np.allclose(sim.truth.drone_position_ned_m, truth, atol=1e-6)
+    errors = np.array(errors)
+    assert len(errors) > 1000
+    assert np.mean(nees) == pytest.approx(3.0, abs=0.8)  # ~100 independent stretches of tau in 60 s
+    assert _lag1(errors) > 0.5  # consecutive reports share most of the error (white: ~0)

@@ -1,0 +1,92 @@
+"""Identification of the vehicle's velocity response from a tlog (companion identify)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.cli import main
+from companion.core.planner.vehicle_model import AxisResponse
+from companion.mavlink import messages, px4
+from companion.mavlink.tlog import TlogWriter
+from companion.offline.identify import IdentifyError, identify, load_response_log, step_sequence
+
+T0 = 1_800_000_000.0
+TRUE_H = AxisResponse(1.6, 0.35, 0.8, 0.2)      # PX4-like: two-part horizontal response
+TRUE_V = AxisResponse(4.0, 0.0, 0.0, 0.0)      # a 0.25 s lag
+
+
+def _pack(msg, sysid, compid):
+    mav = mavlink2.MAVLink(None, sysid, compid)
+    return bytes(msg.pack(mav))
+
+
+def write_step_log(path, seed=0, noise_mps=0.01, offboard=True):
+    """A tlog of the step sequence flown by a vehicle with TRUE_H / TRUE_V, LOCAL_POSITION_NED at 50 Hz."""
+    rng = np.random.default_rng(seed)
+    dt = 0.002
+    axes = (TRUE_H, TRUE_H, TRUE_V)
+    mats = [ax.matrices() for ax in axes]
+    x = [ax.steady_state(0.0) for ax in axes]
+    mode = px4.OFFBOARD if offboard else px4.POSCTL
+    t = 0.0
+    with TlogWriter(path) as log:
+        for duration, v_cmd in step_sequence():
+            end = t + duration
+            while t < end - 1e-9:
+                k = int(round(t / dt))
+                if k % 500 == 0:
+                    hb = mavlink2.MAVLink_heartbeat_message(2, 12, 145 if offboard else 209, mode, 4, 3)
+                    log.write(T0 + t, _pack(hb, 1, 1))
+                if k % 25 == 0:
+                    log.write(T0 + t, _pack(messages.velocity_setpoint(int(t * 1000), v_cmd), 1, 191))
+                if k % 10 == 0:
+                    v = [xi[1] + rng.normal(0, noise_mps) for xi in x]
+                    lpn = mavlink2.MAVLink_local_position_ned_message(int(t * 1000), *(xi[0] for xi in x), *v)
+                    log.write(T0 + t, _pack(lpn, 1, 1))
+                for i, (a, b) in enumerate(mats):
+                    x[i] = x[i] + dt * (a @ x[i] + b * v_cmd[i])
+                t += dt
+    return path
+
+
+@pytest.fixture(scope="module")
+def step_log(tmp_path_factory):
+    return write_step_log(tmp_path_factory.mktemp("identify") / "steps.tlog")
+
+
+def test_that_identification_recovers_the_response_and_predicts_better_than_the_lag(step_log):
+    log = load_response_log(step_log)
+    assert log.kinds["velocity"] > 1000 and log.duration_s > 60
+    result = identify(log)
+    h = result.horizontal
+    assert h.p_gain_per_s == pytest.approx(TRUE_H.p_gain_per_s, rel=0.15)
+    assert h.i_gain_per_s2 == pytest.approx(TRUE_H.i_gain_per_s2, rel=0.2)
+    assert h.drag_per_s == pytest.approx(TRUE_H.drag_per_s, rel=0.2)
+    model, lag = result.figures["model"], result.figures["lag 0.3 s"]
+    assert model["fit_rms_horizontal"] < 0.03
+    assert lag["one_step_rms_horizontal"] > 3 * model["one_step_rms_horizontal"]
+
+
+def test_that_identify_prints_the_table_and_writes_the_scenario_table(step_log, tmp_path, capsys):
+    table = tmp_path / "response.toml"
+    assert main(["identify", str(step_log), "--write-scenario", str(table)]) == 0
+    out = capsys.readouterr().out
+    assert "horizontal" in out and "lag 0.3 s" in out and "prediction error of the lag / of the model" in out
+    import tomllib
+
+    from companion.core.planner import PlannerConfig
+
+    parsed = tomllib.loads(table.read_text())["planner"]
+    cfg = PlannerConfig.from_toml_table(parsed)
+    assert cfg.vehicle_response[0].p_gain_per_s == pytest.approx(TRUE_H.p_gain_per_s, rel=0.15)
+
+
+def test_that_a_log_never_in_offboard_cannot_be_identified(tmp_path, capsys):
+    path = write_step_log(tmp_path / "posctl.tlog", offboard=False)
+    with pytest.raises(IdentifyError, match="no OFFBOARD stretch"):
+        load_response_log(path)
+    assert main(["identify", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "posctl.tlog" in err[0]

@@ -1,0 +1,172 @@
+"""Fly the companion against PX4 SITL through a scenario's encounter and judge it against SIH's ground truth.
+
+Usage (one run, or five for the note)::
+
+    python -m tests.px4.flight [--scenario configs/antipodal.toml] [--runs 5] [--work /tmp/px4-flight]
+
+Each run starts PX4 SIH in a fresh directory, runs :class:`tests.px4.world.World`
+(obstacles to the companion, ground truth), runs ``companion fly --arm --takeoff-alt 5
+--exit-after-goal 1 --tlog`` as a subprocess, watches PX4 for 4 s after the companion
+exits (it must hold, without "Failsafe" from 3 s before the companion stopped on; "Failsafe"
+texts earlier in the flight are reported with the largest gap of the setpoint stream, which
+PX4 answers with one after COM_OF_LOSS_T = 1 s), stops everything, replays the tlog with
+``companion replay`` and returns the figures. Everything started is stopped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from tests.px4.sitl import REPO, Sitl
+from tests.px4.world import World, paths_from_scenario
+
+logger = logging.getLogger(__name__)
+
+TAKEOFF_ALT_M = 5.0
+COMPANION_TIMEOUT_S = 150.0
+HOLD_WATCH_S = 4.0
+AUTO, LOITER = 4, 3
+
+
+def _companion(*args: str) -> list[str]:
+    return [sys.executable, "-m", "companion.cli", *args]
+
+
+def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] = ()) -> dict:
+    """One flight; returns the figures (see the module docstring)."""
+    work.mkdir(parents=True, exist_ok=True)
+    tlog = work / "flight.tlog"
+    with open(scenario, "rb") as f:
+        scen = tomllib.load(f)
+    goal = np.asarray(scen["mission"]["goal_ned_m"], float)
+    radius = float(scen["vehicle"]["radius_m"])
+    paths = paths_from_scenario(str(scenario))
+    result: dict = {"work": str(work)}
+    with Sitl(work / "sih") as sitl:
+        world = World(paths, seed=seed)
+        world.start()
+        try:
+            try:   # subprocess.run kills the companion on the timeout
+                proc = subprocess.run(
+                    _companion("fly", "--connect", "udpin:127.0.0.1:14540", "--scenario", str(scenario), "--arm",
+                               "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--tlog", str(tlog),
+                               "--duration", str(COMPANION_TIMEOUT_S - 20), "--json", *extra),
+                    capture_output=True, text=True, timeout=COMPANION_TIMEOUT_S, cwd=REPO)
+            except subprocess.TimeoutExpired as exc:
+                proc = subprocess.CompletedProcess(exc.cmd, -9, exc.stdout or "", exc.stderr or "")
+                proc.stdout, proc.stderr = "", str(exc.stderr or "") + f"\ncompanion killed after {COMPANION_TIMEOUT_S} s"
+            t_exit = time.monotonic()
+            time.sleep(HOLD_WATCH_S)
+            result["px4_alive"] = sitl.alive()
+        finally:
+            world.stop()
+    (work / "companion.stderr").write_text(proc.stderr)
+    result["companion_rc"] = proc.returncode
+    report = json.loads(proc.stdout) if proc.returncode in (0, 1) and proc.stdout.strip() else {}
+    result["companion_report"] = {k: report.get(k) for k in ("phase", "goal_reached_companion_t_s", "replans",
+                                                             "min_realised_contour", "replans_with_slack",
+                                                             "failed_plans", "plan_status", "failsafe_events")}
+    obs = world.obs
+    result["world_errors"] = world.errors
+    truth_t = np.array([t for t, _ in obs.truth])
+    truth_p = np.array([p for _, p in obs.truth])
+    if obs.offboard_t is None or truth_t.size == 0:
+        result["ok"] = False
+        result["why"] = "never in OFFBOARD" if truth_t.size else "no ground truth received"
+        return result
+    # takeoff: true height when OFFBOARD was engaged (after AUTO.TAKEOFF -> AUTO.LOITER)
+    i_off = int(np.searchsorted(truth_t, obs.offboard_t))
+    result["takeoff_height_m"] = float(-truth_p[min(i_off, truth_t.size - 1), 2])
+    # collisions in truth: obstacles' true positions at the truth sample times
+    moving = truth_t - obs.offboard_t
+    clear = []
+    for path in paths:
+        pos = np.array([path.position(t) for t in moving])
+        clear.append(np.linalg.norm(truth_p - pos, axis=1) - radius - path.radius_m)
+    after = truth_t >= obs.offboard_t
+    clear = np.array(clear)[:, after] if paths else np.zeros((0, 0))
+    result["min_true_clearance_m"] = float(clear.min()) if clear.size else None
+    # goal: the companion's time of arrival after engaging, and the true distance to the goal then
+    t_goal = report.get("goal_reached_companion_t_s")
+    engaged = [t for t, text in report.get("events", []) if str(text).startswith("ENGAGED")]
+    result["time_to_goal_s"] = None if t_goal is None or not engaged else float(t_goal - engaged[0])
+    dist = np.linalg.norm(truth_p[after] - goal, axis=1)
+    result["min_true_goal_distance_m"] = float(dist.min())
+    # the end: PX4 holds, no failsafe
+    end_modes = [(main, sub, armed) for t, main, sub, armed in obs.modes if t >= t_exit]
+    result["modes_after_exit"] = sorted({f"{m}.{s}{'' if a else ' disarmed'}" for m, s, a in end_modes})
+    result["failsafe_texts"] = [(round(t - obs.offboard_t, 2), text.strip()) for t, text in obs.texts
+                                if "ailsafe" in text]
+    result["failsafe_texts_at_end"] = [text.strip() for t, text in obs.texts if "ailsafe" in text and t >= t_exit - 3.0]
+    # the setpoint stream as recorded: PX4 flags offboard loss after COM_OF_LOSS_T (1 s) without one
+    from companion.mavlink.tlog import read_tlog
+    sp_t = np.array([t for t, m in read_tlog(tlog) if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"])
+    result["setpoints"] = int(sp_t.size)
+    result["largest_setpoint_gap_s"] = round(float(np.diff(sp_t).max()), 2) if sp_t.size > 1 else None
+    result["px4_texts"] = [(round(t - obs.offboard_t, 2), text.strip()) for t, text in obs.texts]
+    result["companion_exit_after_offboard_s"] = round(t_exit - obs.offboard_t, 2)
+    result["holds_after_exit"] = bool(end_modes) and all((m, s) == (AUTO, LOITER) and a for m, s, a in end_modes)
+    # replay the recorded tlog
+    rep = subprocess.run(_companion("replay", str(tlog), "--scenario", str(scenario), "--arm", "--takeoff-alt",
+                                    str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--json", *extra),
+                         capture_output=True, text=True, timeout=300, cwd=REPO)
+    if rep.returncode == 0:
+        s = json.loads(rep.stdout)
+        result["replay"] = {k: s.get(k) for k in ("replans", "commands_compared", "commands_recorded",
+                                                  "max_abs_diff_mps", "unmatched_commands", "tick_mismatches")}
+    else:
+        result["replay"] = {"error": rep.stderr.strip()[-500:]}
+    result["ok"] = judge(result) == []
+    return result
+
+
+def judge(r: dict) -> list[str]:
+    """The failed checks of a run (empty when it passed)."""
+    bad = []
+    if r.get("takeoff_height_m") is None or abs(r["takeoff_height_m"] - TAKEOFF_ALT_M) > 0.3:
+        bad.append(f"takeoff height {r.get('takeoff_height_m')} m, asked {TAKEOFF_ALT_M} m")
+    if r.get("min_true_clearance_m") is None or r["min_true_clearance_m"] <= 0.0:
+        bad.append(f"collision in truth: clearance {r.get('min_true_clearance_m')} m")
+    rc = r.get("companion_report", {})
+    if rc.get("min_realised_contour") is not None and rc["min_realised_contour"] < 0.90 - 1e-9:
+        bad.append(f"realised contour {rc['min_realised_contour']} below c_min")
+    if r.get("time_to_goal_s") is None or r["time_to_goal_s"] > 25.0:
+        bad.append(f"time to goal {r.get('time_to_goal_s')} s after OFFBOARD")
+    if not r.get("holds_after_exit") or r.get("failsafe_texts_at_end"):
+        bad.append(f"end: modes {r.get('modes_after_exit')}, failsafe texts {r.get('failsafe_texts_at_end')}")
+    rp = r.get("replay", {})
+    if rp.get("max_abs_diff_mps") != 0.0 or rp.get("unmatched_commands") or \
+            rp.get("commands_compared") != rp.get("commands_recorded"):
+        bad.append(f"replay {rp}")
+    return bad
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default=str(REPO / "configs" / "antipodal.toml"))
+    ap.add_argument("--runs", type=int, default=1)
+    ap.add_argument("--work", default="/tmp/px4-flight")
+    ap.add_argument("extra", nargs="*", help="extra companion arguments (after --)")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO)
+    results = []
+    for i in range(args.runs):
+        r = fly_once(Path(args.work) / f"run{i}", Path(args.scenario), seed=i, extra=tuple(args.extra))
+        r["failed"] = judge(r)
+        results.append(r)
+        print(json.dumps(r, indent=1, default=str), flush=True)
+    print("passed", sum(not r["failed"] for r in results), "of", len(results))
+    return 0 if all(not r["failed"] for r in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
