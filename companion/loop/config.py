@@ -106,6 +106,10 @@ class LoopConfig:
         the filter's covariance while none is reported; ``"estimate"`` always uses the
         companion filter's covariance; ``"predicted"`` uses its open-loop prediction.
     drone_cov_floor_m2 : isotropic floor added to the drone's planning covariance.
+    max_constrained_tracks : most obstacle tracks one replan constrains; the riskiest are
+        chosen (:mod:`companion.loop.track_selection`), the rest counted and reported.
+    max_plan_age_s : link seconds after its request past which a plan is no longer flown
+        (the stream brakes within the acceleration bound until a newer plan arrives).
 
     prestream_s, retry_period_s, max_retries, reengage : OFFBOARD engagement (see ``companion.mavlink.offboard``).
     setpoint_kind : ``"velocity"`` (default) streams the plan's velocity commands;
@@ -118,6 +122,8 @@ class LoopConfig:
     obstacle_radius_m: float = 0.5
     drone_covariance: str = "reported"
     drone_cov_floor_m2: float = 0.0
+    max_plan_age_s: float = 1.0
+    max_constrained_tracks: int = 8
     prestream_s: float = 1.0
     retry_period_s: float = 1.0
     max_retries: int = 5
@@ -134,6 +140,10 @@ class LoopConfig:
             raise ConfigError(f"[companion] setpoint_rate_hz must be >= 10 Hz (PX4 needs > 2 Hz), got {self.setpoint_rate_hz!r}")
         if self.setpoint_kind not in ("velocity", "position_velocity"):
             raise ConfigError(f"[companion] setpoint_kind must be 'velocity' or 'position_velocity', got {self.setpoint_kind!r}")
+        if not (isinstance(self.max_plan_age_s, (int, float)) and math.isfinite(self.max_plan_age_s) and self.max_plan_age_s > 0.0):
+            raise ConfigError(f"[companion] max_plan_age_s must be finite seconds > 0, got {self.max_plan_age_s!r}")
+        if isinstance(self.max_constrained_tracks, bool) or not isinstance(self.max_constrained_tracks, int) or not 1 <= self.max_constrained_tracks <= 64:
+            raise ConfigError(f"[companion] max_constrained_tracks must be an integer in 1..64, got {self.max_constrained_tracks!r}")
         if self.drone_covariance not in ("reported", "estimate", "predicted"):
             raise ConfigError(f"[companion] drone_covariance must be 'reported', 'estimate' or 'predicted', got {self.drone_covariance!r}")
 
