@@ -43,6 +43,9 @@ def test_that_defaults_are_valid_and_frozen():
         ({"solver_polish": "yes"}, r"solver_polish = 'yes' must be true or false"),
         ({"solver_rho": 0.0}, r"solver_rho = 0.0 must be positive"),
         ({"solver_max_iter": 0}, r"solver_max_iter = 0 must be >= 1"),
+        ({"replan_work_budget": 199}, r"replan_work_budget = 199 must be >= 200"),
+        ({"replan_work_budget": 1e4}, r"replan_work_budget = 10000.0 must be an integer"),
+        ({"replan_work_budget": True}, r"replan_work_budget = True must be an integer"),
     ],
 )
 def test_that_bad_values_get_clear_errors(kwargs, match):

@@ -26,6 +26,9 @@ logger = logging.getLogger(__name__)
 #: the overlap of Gaussians; ``deterministic`` and ``bhattacharyya`` are baselines.
 FORMULATIONS: tuple[str, ...] = ("hyperplane", "paper", "deterministic", "bhattacharyya")
 
+#: Smallest ``replan_work_budget``: one QP solve plus a few dozen ADMM iterations.
+MIN_WORK_BUDGET = 200
+
 #: Spatial dimension of the planner (3-D NED); the overlap module also handles 2-D.
 DIM = 3
 
@@ -35,6 +38,8 @@ DIM = 3
 MAX_HORIZON_STEPS = 400
 MAX_SCP_ITERATIONS = 100
 MAX_SOLVER_ITERATIONS = 100_000
+#: Largest ``replan_work_budget`` (ADMM iterations summed over a replan's QPs).
+MAX_WORK_BUDGET = 10_000_000
 
 
 def _axis_vector(name: str, value: Any) -> tuple[float, float, float]:
@@ -153,6 +158,15 @@ class PlannerConfig:
     solver_rho : float
         OSQP's initial ADMM step size, restored before every QP of the SCP (see
         :mod:`companion.core.planner.osqp_qp`).
+    replan_work_budget : int
+        Compute budget of one replan in work units, never wall time, so a replan's
+        result does not depend on the machine: one unit per ADMM iteration, summed over
+        every QP of the replan (hard, least-slack, capped and last-resort soft QPs), plus
+        :data:`companion.core.planner.budget.QP_SOLVE_WORK` units per QP solved (its
+        linearisation, update, factorisation and exact recheck, which grow with the SCP
+        iterations). When it runs out the planner returns its best safe iterate or fails
+        (status ``'failed'``: the loop brakes). The default keeps the largest replan of
+        the shipped scenes well under the 0.3 s replan period (docs/PLANNER_BUDGET.md).
     """
 
     formulation: str = "hyperplane"
@@ -183,6 +197,7 @@ class PlannerConfig:
     solver_polish: bool = False
     solver_max_iter: int = 2000
     solver_rho: float = 0.1
+    replan_work_budget: int = 12000
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -207,6 +222,8 @@ class PlannerConfig:
         check.boolean("solver_polish", self.solver_polish)
         if self.vehicle_response is not None:
             set_("vehicle_response", _vehicle_response(self.vehicle_response))
+        set_("replan_work_budget", check.integer("replan_work_budget", self.replan_work_budget, lo=MIN_WORK_BUDGET,
+                                                 hi=MAX_WORK_BUDGET))
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
