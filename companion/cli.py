@@ -13,6 +13,7 @@ import logging
 import pkgutil
 from importlib import metadata
 import sys
+from typing import NoReturn
 
 from companion import commands as _commands
 from companion.errors import CompanionError
@@ -30,8 +31,15 @@ def _version() -> str:
         return __version__
 
 
+class OneLineErrorParser(argparse.ArgumentParser):
+    """argparse with its errors on one line (``companion SUB: error: argument --x: ...``), exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrorParser(
         prog="companion",
         description="PX4 companion: overlap-of-Gaussians chance-constrained MPC over MAVLink.",
     )
@@ -57,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     except CompanionError as exc:
         print(f"companion {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except FileNotFoundError as exc:
+    except OSError as exc:  # a file or directory that cannot be read or written, a port in use
         print(f"companion {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

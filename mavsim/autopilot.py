@@ -22,7 +22,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from mavsim.params import ParamStore
-from mavsim.px4 import SEV_WARNING, MAV_RESULT, Commander, OffboardSetpoint
+from mavsim.px4 import SEV_WARNING, Commander, OffboardSetpoint
 from mavsim.telemetry import DEFAULT_RATES_HZ, MSG_AUTOPILOT_VERSION, STREAM_IDS, TelemetryBuilder
 from mavsim.vehicle import VehicleState
 
@@ -137,12 +137,12 @@ class Autopilot:
         if command == 176:  # MAV_CMD_DO_SET_MODE
             base, main, sub = _finite_int(p[0]), _finite_int(p[1]), _finite_int(p[2])
             if base is None or main is None or not base & 1:
-                result = MAV_RESULT.DENIED
+                result = mavlink2.MAV_RESULT_DENIED
             else:
                 result = c.request_mode(main, sub or 0, now_s, veh)
         elif command == 400:  # MAV_CMD_COMPONENT_ARM_DISARM
             if p[0] not in (0.0, 1.0):
-                result = MAV_RESULT.DENIED
+                result = mavlink2.MAV_RESULT_DENIED
             else:
                 result = c.request_arm(p[0] == 1.0, p[1] == 21196.0, now_s, veh)
         elif command == 22:  # MAV_CMD_NAV_TAKEOFF, param7 altitude AMSL
@@ -162,29 +162,29 @@ class Autopilot:
             elif msg_id is not None and (msg_id in self._default_us or msg_id == MSG_AUTOPILOT_VERSION):
                 pos, vel = estimate()
                 reply = self.tm.build(msg_id, now_us, c, veh, pos, vel)
-            result = MAV_RESULT.ACCEPTED if reply is not None else MAV_RESULT.DENIED
+            result = mavlink2.MAV_RESULT_ACCEPTED if reply is not None else mavlink2.MAV_RESULT_DENIED
             if reply is not None:
                 extra.append(reply)
         elif command == 511:  # SET_MESSAGE_INTERVAL, param2 in us (-1 off, 0 default)
             msg_id, iv = _finite_int(p[0]), _finite_int(p[1])
             link = self._link_of(msg)
             if msg_id not in self._default_us or iv is None or iv < -1:
-                result = MAV_RESULT.DENIED
+                result = mavlink2.MAV_RESULT_DENIED
             else:
                 new = None if iv == -1 else (self._default_us[msg_id] if iv == 0 else max(iv, 1000))
                 self.interval_us[link][msg_id] = new
                 self.next_due[link][msg_id] = now_us
-                result = MAV_RESULT.ACCEPTED
+                result = mavlink2.MAV_RESULT_ACCEPTED
         elif command == 510:  # GET_MESSAGE_INTERVAL
             msg_id = _finite_int(p[0])
             if msg_id in self._default_us:
                 iv = self.interval_us[self._link_of(msg)][msg_id]
                 extra.append(mavlink2.MAVLink_message_interval_message(msg_id, -1 if iv is None else iv))
-                result = MAV_RESULT.ACCEPTED
+                result = mavlink2.MAV_RESULT_ACCEPTED
             else:
-                result = MAV_RESULT.DENIED
+                result = mavlink2.MAV_RESULT_DENIED
         else:
-            result = MAV_RESULT.UNSUPPORTED
+            result = mavlink2.MAV_RESULT_UNSUPPORTED
         logger.info("t=%.2f command %d -> result %d", now_s, command, result)
         return [self._ack(msg, command, result)] + extra
 
@@ -195,7 +195,7 @@ class Autopilot:
 
     def _on_set_mode(self, msg, now_us, veh, estimate):
         if not msg.base_mode & 1:
-            return [self._ack(msg, 176, MAV_RESULT.DENIED)]
+            return [self._ack(msg, 176, mavlink2.MAV_RESULT_DENIED)]
         main, sub = (msg.custom_mode >> 16) & 0xFF, (msg.custom_mode >> 24) & 0xFF
         return [self._ack(msg, 176, self.cmdr.request_mode(main, sub, now_us * 1e-6, veh))]
 

@@ -7,7 +7,7 @@ Examples::
     mavsim --lockstep --duration 60 --json              # no sockets: as fast as possible, no client
 
 Exit status: 0 on success, 2 on a bad scenario file or bad arguments (the message
-names the file, section and key), 1 if the ports cannot be bound.
+names the file, section and key; a bad argument; a port that cannot be bound).
 """
 
 from __future__ import annotations
@@ -17,8 +17,12 @@ import json
 import logging
 import math
 import sys
+import time
 from importlib import metadata
+from pathlib import Path
+from typing import NoReturn
 
+from mavsim.signing import SigningKeyError, load_signing_key
 from mavsim.core import OBSTACLE_LINK, Simulator
 from mavsim.errors import ScenarioError, SimulationError
 from mavsim.lockstep import LockstepSimulator
@@ -31,17 +35,51 @@ __all__ = ["main", "build_parser"]
 
 
 def _port(text: str) -> int:
-    v = int(text)
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
     if not 0 <= v <= 65535:
         raise argparse.ArgumentTypeError(f"port must be in 0..65535, got {v}")
     return v
 
 
 def _positive(text: str) -> float:
-    v = float(text)
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
     if not (math.isfinite(v) and v > 0):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
     return v
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= v <= 2**63 - 1:
+        raise argparse.ArgumentTypeError(f"must be an integer in [0, 2**63 - 1], got {text}")
+    return v
+
+
+def _output_file(text: str) -> Path:
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a directory, not a file")
+    if not path.parent.is_dir():
+        raise argparse.ArgumentTypeError(f"directory {path.parent} does not exist")
+    return path
+
+
+_LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
+
+
+def _log_level(text: str) -> str:
+    if text.upper() not in _LOG_LEVELS:
+        raise argparse.ArgumentTypeError(f"must be one of {', '.join(_LOG_LEVELS)}, got {text!r}")
+    return text.upper()
 
 
 def _version() -> str:
@@ -52,15 +90,22 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+class _OneLineErrorParser(argparse.ArgumentParser):
+    """argparse with its errors on one line (``mavsim: error: argument --x: ...``), exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="mavsim", description="PX4-like MAVLink kinematic simulator with scripted obstacles")
+    p = _OneLineErrorParser(prog="mavsim", description="PX4-like MAVLink kinematic simulator with scripted obstacles")
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     p.add_argument("--scenario", help="scenario file (configs/*.toml); default: no obstacles, on the ground")
     p.add_argument("--speed", type=_positive, default=1.0, help="simulated seconds per wall second (default 1)")
     p.add_argument("--duration", type=_positive, help="simulated seconds to run (default: the scenario's duration_s)")
     p.add_argument("--forever", action="store_true", help="run until interrupted (ignores duration_s)")
-    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
-    p.add_argument("--tlog", help="record the API link to this tlog file")
+    p.add_argument("--seed", type=_seed, default=0, help="noise seed (default 0)")
+    p.add_argument("--tlog", type=_output_file, help="record the API link to this tlog file")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON at the end")
     p.add_argument("--api-port", type=_port, default=14540, help="offboard client port to send to (default 14540)")
     p.add_argument("--gcs-port", type=_port, default=14550, help="ground station port to send to (default 14550)")
@@ -72,23 +117,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-gcs", action="store_true", help="serve the API link only")
     p.add_argument("--bind", default="127.0.0.1", help="address to bind (default 127.0.0.1, loopback)")
     p.add_argument("--target-host", default="127.0.0.1", help="host to send to (default 127.0.0.1)")
+    p.add_argument("--signing-key-file", metavar="FILE",
+                   help="MAVLink 2 signing: the 32-byte key as 64 hex digits in FILE (sign all, reject unsigned)")
+    p.add_argument("--signing-key-env", metavar="NAME",
+                   help="MAVLink 2 signing: the key (64 hex digits) in environment variable NAME")
     p.add_argument("--lockstep", action="store_true", help="no sockets: run in lockstep, as fast as possible")
-    p.add_argument("--log-level", default="WARNING", help="logging level (default WARNING)")
+    p.add_argument("--log-level", type=_log_level, default="WARNING", help=f"logging level: {', '.join(_LOG_LEVELS)} (default WARNING)")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``mavsim`` console script; returns the exit status."""
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.WARNING),
+    logging.basicConfig(level=getattr(logging, args.log_level),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
         scenario = load_scenario(args.scenario) if args.scenario else default_scenario()
-    except ScenarioError as exc:
+        signing_key = load_signing_key(args.signing_key_file, args.signing_key_env)
+    except (ScenarioError, SigningKeyError) as exc:
         print(f"mavsim: error: {exc}", file=sys.stderr)
         return 2
     duration = None if args.forever else (args.duration or scenario.duration_s)
     if args.lockstep:
+        if signing_key is not None:
+            print("mavsim: error: signing is for the UDP links; --lockstep has none", file=sys.stderr)
+            return 2
         if duration is None:
             print("mavsim: error: --lockstep needs a duration", file=sys.stderr)
             return 2
@@ -99,14 +152,15 @@ def main(argv: list[str] | None = None) -> int:
         links = [LinkAddress("api", args.api_local_port, args.api_port, args.bind, args.target_host)]
         if not args.no_gcs:
             links.append(LinkAddress("gcs", args.gcs_local_port, args.gcs_port, args.bind, args.target_host))
-        sim = Simulator(scenario, seed=args.seed, links=tuple(l.name for l in links))
+        sim = Simulator(scenario, seed=args.seed, links=tuple(l.name for l in links),
+                        signing=None if signing_key is None else (signing_key, time.time()))
         if OBSTACLE_LINK in sim.links:  # some obstacle sends on its own link, like a perception process
             links.append(LinkAddress(OBSTACLE_LINK, args.obstacle_local_port, args.obstacle_port, args.bind, args.target_host))
         try:
             server = UdpServer(sim, links, speed=args.speed, tlog=args.tlog)
-        except SimulationError as exc:
+        except SimulationError as exc:  # a port in use, an address not ours
             print(f"mavsim: error: {exc}", file=sys.stderr)
-            return 1
+            return 2
         ports = server.local_ports
         print(f"mavsim: scenario {scenario.name!r}, API {args.bind}:{ports['api']} -> "
               f"{args.target_host}:{args.api_port}"

@@ -29,12 +29,14 @@ from pathlib import Path
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
+from mavsim.signing import enable_signing
+
 from mavsim.autopilot import COMPID, SYSID, Autopilot, statustext
 from mavsim.errors import SimulationError
 from mavsim.noise import GaussMarkovError
 from mavsim.obstacles import AUTOPILOT_ALL_LINKS, OWN_API_LINK, ObstacleSystem, noise_factor
 from mavsim.params import ParamStore
-from mavsim.px4 import Commander
+from mavsim.px4 import SEV_WARNING, Commander
 from mavsim.scenario import Scenario, load_scenario
 from mavsim.telemetry import TelemetryBuilder
 from mavsim.truth import Truth, TruthRecorder
@@ -63,9 +65,13 @@ class Simulator:
     links : tuple of str
         Vehicle link names; the first one is the offboard API link. When an obstacle uses
         ``transport = "link"``, :data:`OBSTACLE_LINK` is appended (see :attr:`links`).
+    signing : (key, Unix time s) or None
+        MAVLink 2 signing from boot (see :meth:`enable_signing`): the 32-byte key and the
+        wall time that seeds the outgoing signing timestamps.
     """
 
-    def __init__(self, scenario: Scenario | str | Path, seed: int = 0, links: tuple[str, ...] = ("api",)) -> None:
+    def __init__(self, scenario: Scenario | str | Path, seed: int = 0, links: tuple[str, ...] = ("api",),
+                 signing: tuple[bytes, float] | None = None) -> None:
         if not isinstance(scenario, Scenario):
             scenario = load_scenario(scenario)
         if not links:
@@ -99,8 +105,12 @@ class Simulator:
         self.recorder = TruthRecorder(scenario)
         self.stats: Counter[str] = Counter()
         self.taps: list[Tap] = []
+        self._signing: tuple[bytes, float] | None = None  # (key, Unix time signing began)
+        self._last_signing_text_us = -(10**12)
         self._parsers = {link: self._new_parser() for link in self.links}
         self._encoders: dict[tuple[str, int, int], mavlink2.MAVLink] = {}
+        if signing is not None:
+            self.enable_signing(*signing)  # before the first packet is encoded
         self._pending: list[Packet] = []
         self._est_t = -1
         self._est = (np.zeros(3), np.zeros(3))
@@ -108,11 +118,23 @@ class Simulator:
         self._emit_due()
 
     # ------------------------------------------------------------------ helpers
-    @staticmethod
-    def _new_parser() -> mavlink2.MAVLink:
+    def _new_parser(self) -> mavlink2.MAVLink:
         p = mavlink2.MAVLink(file=None, srcSystem=SYSID, srcComponent=COMPID)
         p.robust_parsing = True  # bad CRC / prefix -> BAD_DATA instead of an exception
+        if self._signing is not None:
+            enable_signing(p, self._signing[0], link_id=0, now_s=self._signing[1])
         return p
+
+    def enable_signing(self, key: bytes, now_s: float) -> None:
+        """MAVLink 2 signing from now on: every packet sent is signed (vehicle and obstacles
+        alike, one network key), and unsigned or badly signed packets received are dropped,
+        counted in ``stats["signature_rejected"]`` and reported by a STATUSTEXT at most
+        every 5 s. ``now_s`` (Unix time) seeds the outgoing signing timestamps."""
+        self._signing = (bytes(key), float(now_s))
+        for mav in self._parsers.values():
+            enable_signing(mav, key, link_id=0, now_s=now_s)
+        for (link, _, _), mav in self._encoders.items():
+            enable_signing(mav, key, link_id=self.links.index(link), now_s=now_s)
 
     @property
     def time_s(self) -> float:
@@ -137,6 +159,8 @@ class Simulator:
         mav = self._encoders.get(key)
         if mav is None:
             mav = self._encoders[key] = mavlink2.MAVLink(file=None, srcSystem=sysid, srcComponent=compid)
+            if self._signing is not None:
+                enable_signing(mav, self._signing[0], link_id=self.links.index(link), now_s=self._signing[1])
         buf = bytes(msg.pack(mav))
         mav.seq = (mav.seq + 1) % 256
         return buf
@@ -171,14 +195,19 @@ class Simulator:
                     self._send(api if route == OWN_API_LINK else OBSTACLE_LINK, ob.sysid, ob.compid, msg)
 
     # ------------------------------------------------------------------ public
-    def receive(self, data: bytes, link: str | None = None) -> None:
+    def receive(self, data: bytes, link: str | None = None, *, datagram: bool = False) -> None:
         """Bytes from a client on ``link`` (default: the API link), any chunking.
 
         Complete packets are handled at the current time; garbage, bad CRCs and
-        truncated packets are counted and dropped, never raised.
+        truncated packets are counted and dropped, never raised. With ``datagram``
+        (UDP) the bytes are one whole datagram: parsing starts fresh, so the partial
+        packet a previous datagram ended with cannot swallow this one.
         """
         link = link or self.links[0]
         parser = self._parsers[link]
+        if datagram:
+            parser.buf, parser.buf_index = bytearray(), 0
+            parser.expected_length, parser.have_prefix_error = mavlink2.HEADER_LEN_V1 + 2, False
         try:
             msgs = parser.parse_buffer(bytes(data)) or []
         except Exception as exc:  # pymavlink raises on some malformed input even in robust mode
@@ -190,6 +219,8 @@ class Simulator:
             mtype = msg.get_type()
             if mtype == "BAD_DATA":
                 self.stats["bad_data"] += 1
+                if "signature" in str(getattr(msg, "reason", "")):
+                    self._signature_rejected()
                 continue
             if isinstance(msg, mavlink2.MAVLink_unknown):  # unknown id: no CRC check possible
                 self.stats["unknown_messages"] += 1
@@ -210,6 +241,13 @@ class Simulator:
             for out_link, reply in replies:
                 self._send(out_link, SYSID, COMPID, reply)
         self._flush_texts()
+
+    def _signature_rejected(self) -> None:
+        self.stats["signature_rejected"] += 1
+        if self.now_us - self._last_signing_text_us >= 5_000_000:
+            self._last_signing_text_us = self.now_us
+            self.commander.texts.append(
+                (SEV_WARNING, f"Rejected bad or no signature ({self.stats['signature_rejected']} so far)"))
 
     def advance_to(self, t_us: int) -> list[Packet]:
         """Run until ``t_us`` (us since boot); return the packets sent meanwhile, in order."""

@@ -31,13 +31,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
 
 from mavsim.params import ParamStore
 from mavsim.vehicle import VehicleCommand, VehicleState
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Commander", "OffboardSetpoint", "MODES", "mode_from_custom", "MAV_RESULT"]
+__all__ = ["Commander", "OffboardSetpoint", "MODES", "mode_from_custom"]
 
 #: PX4 mode name -> (main mode, sub mode).
 MODES: dict[str, tuple[int, int]] = {
@@ -55,14 +56,6 @@ DISPLAY = {"POSCTL": "Position", "AUTO.TAKEOFF": "Takeoff", "AUTO.LOITER": "Hold
 _MAIN_DISPLAY = {1: "Manual", 2: "Altitude", 3: "Position", 4: "Auto", 5: "Acro", 6: "Offboard",
                  7: "Stabilized", 8: "Rattitude"}
 _AUTO_SUB_DISPLAY = {0: "Mission", 1: "Ready", 4: "Mission", 7: "Follow target", 8: "Precision land"}
-
-
-class MAV_RESULT:  # noqa: N801 (MAVLink enum name)
-    ACCEPTED = 0
-    TEMPORARILY_REJECTED = 1
-    DENIED = 2
-    UNSUPPORTED = 3
-    FAILED = 4
 
 
 SEV_CRITICAL, SEV_WARNING, SEV_NOTICE, SEV_INFO = 2, 4, 5, 6
@@ -185,7 +178,7 @@ class Commander:
         if name is None:
             # Manual-input modes (no RC here) and missions (none loaded) are not available.
             self._say(SEV_CRITICAL, f"Switching to {_display(main, sub)} is currently not available")
-            return MAV_RESULT.ACCEPTED
+            return mavlink2.MAV_RESULT_ACCEPTED
         if name == "OFFBOARD" and self.armed and not self.offboard_signal(now_s):
             self._say(SEV_CRITICAL, "Switching to Offboard is currently not available")
             return self.offboard_reject_ack
@@ -193,30 +186,30 @@ class Commander:
             self.takeoff_z = min(vehicle.position_ned_m[2], -self.params["MIS_TAKEOFF_ALT"])
         self.failsafe = False
         self._enter(name, vehicle, now_s)
-        return MAV_RESULT.ACCEPTED
+        return mavlink2.MAV_RESULT_ACCEPTED
 
     def request_takeoff(self, rel_alt_m: float, now_s: float, vehicle: VehicleState) -> int:
         """MAV_CMD_NAV_TAKEOFF to ``rel_alt_m`` above home (NaN: MIS_TAKEOFF_ALT)."""
         alt = self.params["MIS_TAKEOFF_ALT"] if not math.isfinite(rel_alt_m) else rel_alt_m
         if not 0.0 < alt <= 1000.0:
             self._say(SEV_CRITICAL, "Takeoff denied: altitude out of range")
-            return MAV_RESULT.DENIED
+            return mavlink2.MAV_RESULT_DENIED
         self.failsafe = False
         self._enter("AUTO.TAKEOFF", vehicle, now_s)
         self.takeoff_z = min(vehicle.position_ned_m[2], -alt)
-        return MAV_RESULT.ACCEPTED
+        return mavlink2.MAV_RESULT_ACCEPTED
 
     def request_arm(self, arm: bool, force: bool, now_s: float, vehicle: VehicleState) -> int:
         """MAV_CMD_COMPONENT_ARM_DISARM; returns the MAV_RESULT."""
         if arm:
             if self.armed:
-                return MAV_RESULT.ACCEPTED
+                return mavlink2.MAV_RESULT_ACCEPTED
             if now_s < self.arming_delay_s and not force:
                 self._say(SEV_CRITICAL, "Arming denied: Resolve system health failures first")
-                return MAV_RESULT.TEMPORARILY_REJECTED
+                return mavlink2.MAV_RESULT_TEMPORARILY_REJECTED
             if self.mode == "OFFBOARD" and not self.offboard_signal(now_s):
                 self._say(SEV_CRITICAL, "Arming denied: No offboard signal")
-                return MAV_RESULT.TEMPORARILY_REJECTED
+                return mavlink2.MAV_RESULT_TEMPORARILY_REJECTED
             self.armed = True
             self.on_stand = False
             self.arm_time_s = now_s
@@ -224,14 +217,14 @@ class Commander:
             self.landed_since_s = None
             self.hold_point = vehicle.position_ned_m.copy()
             self._say(SEV_INFO, "Armed by external command")
-            return MAV_RESULT.ACCEPTED
+            return mavlink2.MAV_RESULT_ACCEPTED
         if not self.armed:
-            return MAV_RESULT.ACCEPTED
+            return mavlink2.MAV_RESULT_ACCEPTED
         if not vehicle.on_ground and not force:
             self._say(SEV_CRITICAL, "Disarming denied: not landed")
-            return MAV_RESULT.TEMPORARILY_REJECTED
+            return mavlink2.MAV_RESULT_TEMPORARILY_REJECTED
         self._disarm("Disarmed by external command")
-        return MAV_RESULT.ACCEPTED
+        return mavlink2.MAV_RESULT_ACCEPTED
 
     def _disarm(self, why: str) -> None:
         self.armed = False

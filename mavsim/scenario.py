@@ -1,9 +1,13 @@
 """Scenario files (``configs/*.toml``) as mavsim reads them.
 
+(Over 400 lines: about a third is the key reference below; the rest is one reader and
+its one typed accessor, which belong together so that each key sits beside its check.)
+
 mavsim owns ``[sim]`` and ``[world]`` (unknown keys there are rejected, naming file,
 section and key) and reads named keys of the shared sections: ``[scenario]`` (name,
 description, duration_s), ``[vehicle]`` (radius_m, start_ned_m), ``[mission]``
-(goal_ned_m, goal_tolerance_m) and ``[map]`` (walls, static obstacles, for collision
+(goal_ned_m and, with it, the required goal_tolerance_m: the one value both programs
+read) and ``[map]`` (walls, static obstacles, for collision
 truth). Sections owned by the companion (``[planner]``, ``[estimator]``, the rest of
 ``[mission]``) are not inspected.
 
@@ -182,7 +186,7 @@ class Scenario:
     vehicle_radius_m: float
     start_ned_m: np.ndarray
     goal_ned_m: np.ndarray | None
-    goal_tolerance_m: float
+    goal_tolerance_m: float  # required with goal_ned_m (inf without a goal)
     sim: SimConfig
     obstacles: tuple[Obstacle, ...]
     walls: tuple[Wall, ...]
@@ -192,14 +196,19 @@ class Scenario:
     source: str = "<dict>"
 
 
-_SIM_KEYS = {
+#: Largest scenario file read (bytes), waypoints per obstacle, walls and static obstacles.
+MAX_SCENARIO_BYTES = 1 << 20
+MAX_WAYPOINTS = 10_000
+MAX_MAP_ITEMS = 256
+
+SIM_KEYS = {
     "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2", "position_noise_correlation_s",
     "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
     "home_lat_deg", "home_lon_deg", "home_alt_m", "arming_delay_s", "offboard_reject_ack",
     "params", "stream_rates_hz",
 }
-_WORLD_KEYS = {"obstacles", "obstacle_sysid_base", "obstacle_compid"}
-_OBSTACLE_KEYS = {
+WORLD_KEYS = {"obstacles", "obstacle_sysid_base", "obstacle_compid"}
+OBSTACLE_KEYS = {
     "name", "radius_m", "start_ned_m", "velocity_ned_mps", "waypoints_ned_m", "speed_mps", "loop",
     "measurement_cov_m2", "velocity_cov_m2ps2", "report_rate_hz", "start_delay_s",
     "transport", "message", "clock_offset_s", "clock_drift", "icao_address", "emitter_type",
@@ -310,7 +319,7 @@ class _Section:
 
 
 def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
-    s = _Section(src, "sim", raw, _SIM_KEYS)
+    s = _Section(src, "sim", raw, SIM_KEYS)
     airborne = s.boolean("start_airborne", start_z < 0)
     mode = s.string("start_mode", "AUTO.LOITER" if airborne else "POSCTL")
     if mode not in MODE_NAMES:
@@ -352,7 +361,7 @@ def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
 
 
 def _obstacle(src: str, index: int, raw: Any) -> Obstacle:
-    s = _Section(src, f"world.obstacles[{index}]", raw, _OBSTACLE_KEYS)
+    s = _Section(src, f"world.obstacles[{index}]", raw, OBSTACLE_KEYS)
     has_v, has_w = s.has("velocity_ned_mps"), s.has("waypoints_ned_m")
     if has_v == has_w:
         raise s.err("velocity_ned_mps", "give exactly one of velocity_ned_mps or waypoints_ned_m")
@@ -364,6 +373,8 @@ def _obstacle(src: str, index: int, raw: Any) -> Obstacle:
             raise s.err("waypoints_ned_m", f"must be a list of 3-vectors: {exc}") from None
         if waypoints.ndim != 2 or waypoints.shape[1] != 3 or len(waypoints) == 0 or not np.all(np.isfinite(waypoints)):
             raise s.err("waypoints_ned_m", "must be a non-empty list of finite 3-vectors")
+        if len(waypoints) > MAX_WAYPOINTS:
+            raise s.err("waypoints_ned_m", f"{len(waypoints)} waypoints, at most {MAX_WAYPOINTS} allowed")
         if not s.has("speed_mps"):
             raise s.err("speed_mps", "missing (needed with waypoints_ned_m)")
     elif s.has("speed_mps") or s.has("loop"):
@@ -411,16 +422,20 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario
     sc = _Section(source, "scenario", data.get("scenario", {}))
     veh = _Section(source, "vehicle", data.get("vehicle", {}))
     mission = _Section(source, "mission", data.get("mission", {}))
+    if mission.has("goal_ned_m") and not mission.has("goal_tolerance_m"):
+        raise mission.err("goal_tolerance_m", "missing (required with goal_ned_m; the companion reads the same key)")
     start = veh.vector3("start_ned_m", [0.0, 0.0, 0.0])
     sim = _sim_config(source, data.get("sim", {}), float(start[2]))
     if not sim.start_airborne:
         start = np.array([start[0], start[1], 0.0])
     elif start[2] >= 0:
         raise veh.err("start_ned_m", "start_airborne = true needs z < 0 (NED, z down)")
-    world = _Section(source, "world", data.get("world", {}), _WORLD_KEYS)
+    world = _Section(source, "world", data.get("world", {}), WORLD_KEYS)
     raw_obs = world.table.get("obstacles", [])
     if not isinstance(raw_obs, list):
         raise world.err("obstacles", "must be an array of tables [[world.obstacles]]")
+    if len(raw_obs) > 254:
+        raise world.err("obstacles", f"{len(raw_obs)} obstacles, at most 254 allowed (one system id each)")
     obstacles = tuple(_obstacle(source, i, o) for i, o in enumerate(raw_obs))
     names = [o.name for o in obstacles]
     if len(set(names)) != len(names):
@@ -430,6 +445,10 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario
         raise world.err("obstacle_sysid_base", "too many obstacles for the system id range")
     compid = world.integer("obstacle_compid", 197, lo=2, hi=255)
     mp = _Section(source, "map", data.get("map", {}))
+    for key in ("walls", "static_obstacles"):
+        items = mp.table.get(key, [])
+        if not isinstance(items, list) or len(items) > MAX_MAP_ITEMS:
+            raise mp.err(key, f"must be an array of at most {MAX_MAP_ITEMS} tables")
     walls = []
     for i, w in enumerate(mp.table.get("walls", [])):
         ws = _Section(source, f"map.walls[{i}]", w)
@@ -450,7 +469,7 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario
         vehicle_radius_m=veh.number("radius_m", 0.5, lo=0.0),
         start_ned_m=start,
         goal_ned_m=goal,
-        goal_tolerance_m=mission.number("goal_tolerance_m", 0.5, positive=True),
+        goal_tolerance_m=mission.number("goal_tolerance_m", 0.3, positive=True) if goal is not None else math.inf,
         sim=sim,
         obstacles=obstacles,
         walls=tuple(walls),
@@ -472,9 +491,17 @@ def load_scenario(path: str | Path) -> Scenario:
     p = Path(path)
     try:
         with p.open("rb") as f:
-            data = tomllib.load(f)
+            raw = f.read(MAX_SCENARIO_BYTES + 1)
+    except IsADirectoryError:
+        raise ScenarioError(f"{p}: is a directory, not a scenario file") from None
     except OSError as exc:
         raise ScenarioError(f"{p}: cannot read scenario file: {exc.strerror or exc}") from None
+    if len(raw) > MAX_SCENARIO_BYTES:
+        raise ScenarioError(f"{p}: scenario file larger than {MAX_SCENARIO_BYTES} bytes")
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{p}: not a UTF-8 text file (byte offset {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{p}: not valid TOML: {exc}") from None
     return scenario_from_dict(data, str(p))

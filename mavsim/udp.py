@@ -90,6 +90,7 @@ class UdpServer:
         self.sim = sim
         self.speed = float(speed)
         self.stop_event = threading.Event()
+        self._tlog: TlogWriter | None = None
         self._links: dict[str, _Link] = {}
         try:
             for addr in links:
@@ -145,7 +146,7 @@ class UdpServer:
                         logger.debug("%s: recv error: %s", name, exc)
                         break
                     self._links[name].remote = src  # answer whoever talks to us, as PX4 does
-                    self.sim.receive(data, name)
+                    self.sim.receive(data, name, datagram=True)  # each datagram parsed on its own
             self._send(self.sim.drain())
         if self._tlog is not None:
             self._tlog.flush()

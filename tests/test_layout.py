@@ -80,3 +80,11 @@ def test_that_every_package_in_the_tree_is_listed_for_the_wheel():
         for init in (ROOT / top).rglob("__init__.py"):
             found.add(".".join(init.parent.relative_to(ROOT).parts))
     assert listed == found
+
+
+def test_that_the_two_signing_modules_stay_twins():
+    """companion and mavsim may not import each other, so each carries MAVLink signing: the same code."""
+    def code(path: Path) -> str:
+        text = path.read_text()
+        return text[text.index('"""', 3) + 3:]  # everything after the module docstring
+    assert code(ROOT / "companion/mavlink/signing.py") == code(ROOT / "mavsim/signing.py")

@@ -18,7 +18,14 @@ import json
 import logging
 from pathlib import Path
 
-from companion.commands._argtypes import integer_at_least, non_negative_seconds, open_unit_interval, positive_seconds
+from companion.commands._argtypes import (
+    integer_at_least,
+    non_negative_seconds,
+    open_unit_interval,
+    output_file,
+    positive_seconds,
+    seed,
+)
 from companion.errors import ConfigError
 from companion.offline.campaign import (
     DEFAULT_DURATION_S,
@@ -54,7 +61,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--episodes", type=integer_at_least(1), default=20, help="number of episodes (indices 0..N-1)")
     p.add_argument("--methods", type=_methods, default=list(METHODS), help="comma-separated planner formulations",
                    metavar=",".join(METHODS))
-    p.add_argument("--seed", type=int, default=0, help="campaign seed (episode i uses default_rng([seed, i]))")
+    p.add_argument("--seed", type=seed, default=0, help="campaign seed (episode i uses default_rng([seed, i]))")
     p.add_argument("--workers", type=integer_at_least(1), default=None, help="local worker processes (default: CPU count)")
     p.add_argument("--scheduler", metavar="ADDRESS", default=None,
                    help="run the episodes on a Dask distributed cluster (e.g. tcp://10.0.0.5:8786); "
@@ -76,7 +83,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="continue the results file: run only the runs it does not hold yet")
     p.add_argument("--progress", choices=PROGRESS_MODES, default="auto",
                    help="progress bar on a terminal, a one-line log every 30 s otherwise")
-    p.add_argument("--json", metavar="FILE", help="write the summary and per-episode rows as JSON")
+    p.add_argument("--json", type=output_file, metavar="FILE", help="write the summary and per-episode rows as JSON")
     p.add_argument("--plot", metavar="DIR", help="draw the campaign figures (PNG) into DIR")
     p.set_defaults(func=run)
 

@@ -12,7 +12,9 @@ import time
 from importlib import resources
 from pathlib import Path
 
+from companion.commands._argtypes import integer_at_least, positive_number, seed
 from companion.errors import ConfigError
+from companion.offline.crowd import MAX_SYSTEMS
 from companion.offline.report import format_report, truth_report
 
 SCENARIOS = ("antipodal", "corridor", "single_obstacle")
@@ -45,13 +47,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("scenario", nargs="?", default="antipodal", help=f"{' | '.join(SCENARIOS)} or a scenario .toml")
-    p.add_argument("--seed", type=int, default=0, help="simulator noise seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="simulator noise seed (default 0)")
     p.add_argument("--formulation", default=None, help="planner formulation (hyperplane, paper, deterministic, bhattacharyya)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--out", default=None, metavar="DIR", help="keep the tlogs, the ground-truth summary and the figures here")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--realtime", action="store_true", help="two processes over loopback UDP in real time")
-    p.add_argument("--speed", type=float, default=1.0, help="with --realtime: simulated seconds per wall second of mavsim (default 1)")
+    p.add_argument("--speed", type=positive_number, default=1.0, help="with --realtime: simulated seconds per wall second of mavsim (default 1)")
+    p.add_argument("--signing-key-file", metavar="FILE", help="with --realtime: both programs sign with the key in FILE")
+    p.add_argument("--signing-key-env", metavar="NAME",
+                   help="with --realtime: both programs sign with the key in environment variable NAME")
+    p.add_argument("--crowd", type=integer_at_least(0), default=0, metavar="N",
+                   help=f"with --realtime: N extra stationary systems (at most {MAX_SYSTEMS}) report from 4-9 m beside the route")
     p.set_defaults(func=run)
 
 
@@ -68,9 +75,18 @@ def run(args: argparse.Namespace) -> int:
         overrides["formulation"] = args.formulation
     if args.no_c_max:
         overrides["c_max"] = None
+    from companion.offline.scenario_file import load_both  # imports mavsim: only the offline tools do
+
+    load_both(scenario, **overrides)  # both programs' sections, before anything starts
+    if not args.realtime and (args.signing_key_file or args.signing_key_env):
+        raise ConfigError("signing is for the UDP links of --realtime; the lockstep demo has none")
     out = Path(args.out) if args.out else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
+    if args.crowd and not args.realtime:
+        raise ConfigError("--crowd needs --realtime")
+    if args.crowd > MAX_SYSTEMS:
+        raise ConfigError(f"--crowd: at most {MAX_SYSTEMS} systems, got {args.crowd}")
     summary = _run_realtime(scenario, args, overrides, out) if args.realtime else _run_lockstep(scenario, args, overrides, out)
     if args.json:
         print(json.dumps(summary, indent=2, default=str))
@@ -106,8 +122,45 @@ def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out
     return summary
 
 
+_FLY_START_S = 60.0
+
+
+def _wait_for_listener(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
+    """Wait (bounded) until a process has bound UDP ``port`` on loopback, or has exited."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and proc.poll() is None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                return  # taken: fly is listening
+        time.sleep(0.05)
+
+
+def _crowd(scenario: Path, n: int, seed: int, target_port: int, clock_port: int):
+    """Start ``n`` stationary systems beside the scenario's route (see :mod:`companion.offline.crowd`)."""
+    import tomllib
+
+    import numpy as np
+
+    from companion.offline.crowd import Crowd, positions_off_route
+
+    data = tomllib.loads(scenario.read_text())
+    start = np.asarray(data.get("vehicle", {}).get("start_ned_m", [0.0, 0.0, -5.0]), dtype=float)
+    goal = np.asarray(data["mission"]["goal_ned_m"], dtype=float)
+    return Crowd(positions_off_route(start, goal, n, seed=seed), ("127.0.0.1", target_port), clock_port).start()
+
+
 def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None) -> dict:
+    """mavsim and ``companion fly`` as two processes over loopback UDP; every wait is bounded.
+
+    ``fly`` gets ``--duration`` (the scenario's duration plus 30 s) so it ends by itself;
+    should it not, it is stopped after another 60 s and the summary says so.
+    """
+    from companion.loop.config import load_scenario
+
     api_port, gcs_port, api_local, gcs_local, obstacle_port, obstacle_local = (_free_udp_port() for _ in range(6))
+    fly_duration_s = load_scenario(scenario).duration_s / max(args.speed, 1e-3) + 30.0
     sim_cmd = [
         sys.executable, "-m", "mavsim.cli", "--scenario", str(scenario), "--seed", str(args.seed),
         "--api-port", str(api_port), "--gcs-port", str(gcs_port), "--api-local-port", str(api_local),
@@ -116,7 +169,8 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
     ]
     fly_cmd = [
         sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{api_port}", "--scenario", str(scenario),
-        "--obstacles", f"udpin:127.0.0.1:{obstacle_port}", "--exit-after-goal", "1.0", "--json",
+        "--obstacles", f"udpin:127.0.0.1:{obstacle_port}",
+        "--exit-after-goal", "1.0", "--duration", f"{fly_duration_s:.1f}", "--json",
     ]
     if out is not None:
         sim_cmd += ["--tlog", str(out / "mavsim.tlog")]
@@ -125,23 +179,54 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
         fly_cmd += ["--formulation", overrides["formulation"]]
     if "c_max" in overrides:
         fly_cmd += ["--no-c-max"]
+    for flag, value in (("--signing-key-file", args.signing_key_file), ("--signing-key-env", args.signing_key_env)):
+        if value is not None:  # the key itself never appears on a command line
+            sim_cmd += [flag, value]
+            fly_cmd += [flag, value]
+    # fly first: mavsim's clock starts when it does, and a companion still importing would
+    # find the scenario's obstacles already on their way.
+    fly = subprocess.Popen(fly_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _wait_for_listener(api_port, fly, _FLY_START_S)
+    _wait_for_listener(obstacle_port, fly, _FLY_START_S)  # opened right after the autopilot link
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    crowd = None
+    fly_error = None
     try:
-        fly = subprocess.run(fly_cmd, capture_output=True, text=True, timeout=300)
+        if args.crowd:
+            crowd = _crowd(scenario, args.crowd, args.seed, api_port, gcs_port)
+        try:
+            fly_out, fly_err = fly.communicate(timeout=fly_duration_s + 60.0)
+        except subprocess.TimeoutExpired:
+            fly.kill()
+            fly_out, fly_err = fly.communicate()
+            fly_error = f"companion fly did not end within {fly_duration_s + 60.0:.0f} s and was stopped"
     finally:
+        if fly.poll() is None:
+            fly.kill()
+            fly.communicate()
+        if crowd is not None:
+            crowd.stop()
         sim.send_signal(signal.SIGINT)  # mavsim prints its ground-truth summary on SIGINT
         try:
-            sim_out, _ = sim.communicate(timeout=10)
+            sim_out, sim_err = sim.communicate(timeout=30)
         except subprocess.TimeoutExpired:
             sim.kill()
-            sim_out, _ = sim.communicate()
-    summary = json.loads(fly.stdout) if fly.stdout.strip().startswith("{") else {"fly_error": fly.stderr[-2000:]}
+            sim_out, sim_err = sim.communicate()
+    if fly_out.strip().startswith("{"):
+        summary = json.loads(fly_out)
+    else:
+        summary = {"fly_error": fly_error or fly_err[-2000:]}
     try:
         truth = json.loads(sim_out[sim_out.index("{"):]) if "{" in sim_out else {}
     except json.JSONDecodeError:
         truth = {}
     # No truth (mavsim failed to report): its keys stay out rather than read "no collision".
     summary = {"mode": "realtime", **(truth_report(truth) if truth else {}), **summary}
+    if not truth:
+        summary["sim_error"] = (sim_err or "mavsim printed no summary")[-2000:]
+    if crowd is not None:
+        summary["crowd_systems"] = args.crowd
+        summary["crowd_reports_sent"] = crowd.stats.sent
     if out is not None:
         (out / "truth.json").write_text(json.dumps(truth, indent=2, default=str))
     return summary

@@ -9,10 +9,12 @@ empty or non-tlog file, a log without a PX4 vehicle, a bad scenario).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import sys
 
+from companion.commands._argtypes import finite_number, non_negative_seconds, positive_number
 from companion.offline.replay import replay
 
 logger = logging.getLogger(__name__)
@@ -32,11 +34,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("log", metavar="LOG.tlog", help="the tlog to replay")
     p.add_argument("--scenario", required=True, help="scenario TOML the companion flew (mission, planner, estimator, map)")
     p.add_argument("--formulation", default=None, help="planner formulation the recorded run used (overrides the scenario)")
-    p.add_argument("--time-offset", type=float, default=None, metavar="S",
+    p.add_argument("--time-offset", type=finite_number, default=None, metavar="S",
                    help="seconds subtracted from tlog stamps (default: detect a lockstep log, else 0)")
     p.add_argument("--arm", action="store_true", help="the recorded run armed the vehicle (fly --arm)")
-    p.add_argument("--takeoff-alt", type=float, default=None, metavar="M", help="the recorded run took off (fly --takeoff-alt M)")
-    p.add_argument("--exit-after-goal", type=float, default=None, metavar="S",
+    p.add_argument("--takeoff-alt", type=positive_number, default=None, metavar="M", help="the recorded run took off (fly --takeoff-alt M)")
+    p.add_argument("--exit-after-goal", type=non_negative_seconds, default=None, metavar="S",
                    help="the recorded run handed back S seconds after the goal (fly --exit-after-goal S)")
     p.add_argument("--json", action="store_true", help="print the replay summary as JSON")
     p.add_argument("--plot", default=None, metavar="DIR", help="write the flight figures (PNG) here")
@@ -80,8 +82,10 @@ def run(args: argparse.Namespace) -> int:
     overrides = {"formulation": args.formulation} if args.formulation else {}
     from companion.loop.config import load_scenario
 
-    offboard = load_scenario(args.scenario, **overrides).loop.offboard_config(
-        arm=args.arm, takeoff_alt_m=args.takeoff_alt, hold_after_goal_s=args.exit_after_goal)
+    recorded = load_scenario(args.scenario, **overrides).offboard
+    offboard = dataclasses.replace(recorded, arm=args.arm or recorded.arm,
+                                   takeoff_alt_m=recorded.takeoff_alt_m if args.takeoff_alt is None else args.takeoff_alt,
+                                   hold_after_goal_s=args.exit_after_goal)
     result = replay(args.log, args.scenario, time_offset_s=args.time_offset, offboard=offboard, **overrides)
     summary = result.summary()
     if args.plot:

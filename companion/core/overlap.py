@@ -23,10 +23,18 @@ line when ``S2`` is a multiple of ``S1``), so a Newton iteration on it with a br
 kept from the signs seen converges in a handful of steps to machine precision. Its
 derivative is closed form: ``phi'(u) = 2 - 2 t w / q1 + 2 t v / q2`` with
 ``q1 = x'S1x``, ``q2 = x'S2x``, ``w = (S1x)' A^-1 (S1x)`` and ``v = q1 - t w``.
-The 2x2 and 3x3 solves use closed-form adjugates, vectorised over all pairs.
+The 2x2 and 3x3 solves use closed-form adjugates, vectorised over all pairs
+(:mod:`companion.core.small_matrix`, the one small-matrix kernel).
 
 Everything broadcasts over leading dimensions: means ``(..., d)``, covariances
-``(..., d, d)``; there is no Python loop per pair.
+``(..., d, d)``; there is no Python loop per pair. Inputs are validated once per call
+(or once per request with :class:`CovariancePairs`).
+
+Why this module is over 400 lines: it is the one place that defines the overlap of two
+Gaussians and every quantity the planner derives from it (the confidence/radius/overlap
+maps, the minmax separator, the support margin, the Bhattacharyya baseline and the
+paper's joint terms), all sharing one validation; split, each half would re-export the
+other. The small-matrix algebra lives in :mod:`companion.core.small_matrix`.
 """
 
 from __future__ import annotations
@@ -38,6 +46,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
+from companion.core import small_matrix as K
 from companion.errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -122,50 +131,17 @@ def confidence_from_overlap(overlap: ArrayLike, dim: int) -> Array | float:
 
 
 # --------------------------------------------------------------------------------------
-# Validation and small closed-form linear algebra.
+# Validation (once per call, or once per request with CovariancePairs).
 # --------------------------------------------------------------------------------------
 
 
-def _validate_pair(
-    mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike, check_pd: bool = True
-) -> tuple[Array, Array, Array, Array]:
-    """Check shapes, finiteness, symmetry and (unless the caller does it) positive definiteness.
-
-    Returns the four arrays broadcast to common leading dimensions, covariances symmetrised.
-    """
-    arrays = {}
-    for name, value, extra in (("mu1", mu1, 1), ("cov1", cov1, 2), ("mu2", mu2, 1), ("cov2", cov2, 2)):
-        arr = np.asarray(value, dtype=float)
-        if arr.ndim < extra:
-            raise InputError(f"{name} must have at least {extra} dimension(s), got shape {arr.shape}")
-        if not np.all(np.isfinite(arr)):
-            raise InputError(f"{name} contains NaN or infinite values")
-        arrays[name] = arr
-    d = arrays["mu1"].shape[-1]
-    if arrays["mu2"].shape[-1] != d:
-        raise InputError(f"mu1 and mu2 must have the same last dimension, got {arrays['mu1'].shape} and {arrays['mu2'].shape}")
-    for name in ("cov1", "cov2"):
-        if arrays[name].shape[-2:] != (d, d):
-            raise InputError(f"{name} must have shape (..., {d}, {d}) to match the means, got {arrays[name].shape}")
-    try:
-        lead = np.broadcast_shapes(arrays["mu1"].shape[:-1], arrays["mu2"].shape[:-1], arrays["cov1"].shape[:-2], arrays["cov2"].shape[:-2])
-    except ValueError as exc:
-        raise InputError(f"leading dimensions do not broadcast: {exc}") from None
-    out = []
-    for name in ("mu1", "cov1", "mu2", "cov2"):
-        arr = arrays[name]
-        tail = arr.shape[-1:] if name.startswith("mu") else arr.shape[-2:]
-        arr = np.broadcast_to(arr, lead + tail)
-        if name.startswith("cov"):
-            scale = np.max(np.abs(arr), axis=(-2, -1), keepdims=True)
-            asym = np.abs(arr - np.swapaxes(arr, -1, -2))
-            if np.any(asym > 1e-9 * scale + 1e-300):
-                raise InputError(f"{name} is not symmetric (largest asymmetry {float(np.max(asym)):.3g})")
-            arr = 0.5 * (arr + np.swapaxes(arr, -1, -2))
-            if check_pd:
-                _require_pd(_is_positive_definite(arr), name)
-        out.append(np.ascontiguousarray(arr))
-    return out[0], out[1], out[2], out[3]
+def _checked(name: str, value: ArrayLike, extra: int) -> Array:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim < extra:
+        raise InputError(f"{name} must have at least {extra} dimension(s), got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} contains NaN or infinite values")
+    return arr
 
 
 def _require_pd(ok: NDArray[np.bool_], name: str) -> None:
@@ -175,152 +151,86 @@ def _require_pd(ok: NDArray[np.bool_], name: str) -> None:
         raise InputError(f"{name} is not positive definite{where}")
 
 
-def _is_positive_definite(cov: Array) -> NDArray[np.bool_]:
-    """Sylvester's criterion (closed form for d <= 3, eigenvalues otherwise), vectorised."""
-    d = cov.shape[-1]
-    if d == 1:
-        return cov[..., 0, 0] > 0.0
-    if d == 2:
-        return (cov[..., 0, 0] > 0.0) & (_det(cov) > 0.0)
-    if d == 3:
-        m2 = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
-        return (cov[..., 0, 0] > 0.0) & (m2 > 0.0) & (_det(cov) > 0.0)
-    return np.all(np.linalg.eigvalsh(cov) > 0.0, axis=-1)
+def _symmetrised(name: str, arr: Array) -> Array:
+    scale = np.max(np.abs(arr), axis=(-2, -1), keepdims=True)
+    asym = np.abs(arr - np.swapaxes(arr, -1, -2))
+    if np.any(asym > 1e-9 * scale + 1e-300):
+        raise InputError(f"{name} is not symmetric (largest asymmetry {float(np.max(asym)):.3g})")
+    return 0.5 * (arr + np.swapaxes(arr, -1, -2))
 
 
-def _det(a: Array) -> Array:
-    d = a.shape[-1]
-    if d == 1:
-        return a[..., 0, 0]
-    if d == 2:
-        return a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
-    if d == 3:
-        return (
-            a[..., 0, 0] * (a[..., 1, 1] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 1])
-            - a[..., 0, 1] * (a[..., 1, 0] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 0])
-            + a[..., 0, 2] * (a[..., 1, 0] * a[..., 2, 1] - a[..., 1, 1] * a[..., 2, 0])
-        )
-    return np.linalg.det(a)
+@dataclass(frozen=True)
+class CovariancePairs:
+    """Validated covariance pairs in the batch-last layout of :mod:`companion.core.small_matrix`.
+
+    Built once (shapes, finiteness, symmetry, positive definiteness checked here) and
+    reused for any number of mean pairs: the planner builds one per request and calls
+    :meth:`minmax` at every SCP iterate without validating again.
+
+    Attributes
+    ----------
+    lead : leading (batch) shape of the pairs.
+    s1, s2 : (d, d, n) covariances of the first and second Gaussian, square metres.
+    """
+
+    lead: tuple[int, ...]
+    s1: Array
+    s2: Array
+
+    @classmethod
+    def from_arrays(cls, cov1: ArrayLike, cov2: ArrayLike, lead: tuple[int, ...] | None = None) -> CovariancePairs:
+        """Validate ``cov1``, ``cov2`` (..., d, d), broadcast to ``lead`` (default: their common leading shape)."""
+        c1, c2 = _checked("cov1", cov1, 2), _checked("cov2", cov2, 2)
+        d = c1.shape[-1]
+        for name, arr in (("cov1", c1), ("cov2", c2)):
+            if arr.shape[-2:] != (d, d):
+                raise InputError(f"{name} must have shape (..., {d}, {d}), got {arr.shape}")
+        if lead is None:
+            try:
+                lead = np.broadcast_shapes(c1.shape[:-2], c2.shape[:-2])
+            except ValueError as exc:
+                raise InputError(f"leading dimensions do not broadcast: {exc}") from None
+        out = []
+        for name, arr in (("cov1", c1), ("cov2", c2)):
+            comp = K.matrices_to_components(_symmetrised(name, np.broadcast_to(arr, lead + (d, d))))
+            _require_pd(K.is_positive_definite(comp).reshape(lead), name)
+            out.append(comp)
+        return cls(lead=tuple(lead), s1=out[0], s2=out[1])
+
+    @property
+    def dim(self) -> int:
+        """Spatial dimension ``d``."""
+        return int(self.s1.shape[0])
+
+    def minmax(self, mu1: ArrayLike, mu2: ArrayLike) -> MinmaxResult:
+        """:func:`minmax` of ``N(mu1, s1)`` and ``N(mu2, s2)``; means (lead + (d,)) are trusted (finite)."""
+        d = self.dim
+        m1 = np.broadcast_to(np.asarray(mu1, dtype=float), self.lead + (d,))
+        m2 = np.broadcast_to(np.asarray(mu2, dtype=float), self.lead + (d,))
+        return _minmax(K.vectors_to_components(m1), K.vectors_to_components(m2), self.s1, self.s2, self.lead)
 
 
-def _inv(a: Array) -> Array:
-    """Inverse of a batch of small symmetric positive definite matrices (adjugate for d <= 3)."""
-    d = a.shape[-1]
-    if d > 3:
-        return np.linalg.inv(a)
-    det = _det(a)[..., None, None]
-    if d == 1:
-        return 1.0 / a
-    if d == 2:
-        adj = np.empty_like(a)
-        adj[..., 0, 0] = a[..., 1, 1]
-        adj[..., 1, 1] = a[..., 0, 0]
-        adj[..., 0, 1] = -a[..., 0, 1]
-        adj[..., 1, 0] = -a[..., 1, 0]
-        return adj / det
-    adj = np.empty_like(a)
-    adj[..., 0, 0] = a[..., 1, 1] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 1]
-    adj[..., 0, 1] = a[..., 0, 2] * a[..., 2, 1] - a[..., 0, 1] * a[..., 2, 2]
-    adj[..., 0, 2] = a[..., 0, 1] * a[..., 1, 2] - a[..., 0, 2] * a[..., 1, 1]
-    adj[..., 1, 0] = a[..., 1, 2] * a[..., 2, 0] - a[..., 1, 0] * a[..., 2, 2]
-    adj[..., 1, 1] = a[..., 0, 0] * a[..., 2, 2] - a[..., 0, 2] * a[..., 2, 0]
-    adj[..., 1, 2] = a[..., 0, 2] * a[..., 1, 0] - a[..., 0, 0] * a[..., 1, 2]
-    adj[..., 2, 0] = a[..., 1, 0] * a[..., 2, 1] - a[..., 1, 1] * a[..., 2, 0]
-    adj[..., 2, 1] = a[..., 0, 1] * a[..., 2, 0] - a[..., 0, 0] * a[..., 2, 1]
-    adj[..., 2, 2] = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
-    return adj / det
+def _validate_pair(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> tuple[Array, Array, CovariancePairs]:
+    """Check shapes, finiteness, symmetry and positive definiteness, once.
 
-
-def _mv(m: Array, v: Array) -> Array:
-    """Batched matrix-vector product ``m @ v``."""
-    return (m * v[..., None, :]).sum(axis=-1)
-
-
-def _dot(a: Array, b: Array) -> Array:
-    return (a * b).sum(axis=-1)
-
-
-def _quad(v: Array, m: Array) -> Array:
-    """Batched quadratic form ``v' m v``."""
-    return (v * _mv(m, v)).sum(axis=-1)
-
-
-# Structure of arrays for the hot loop: a d x d matrix over n pairs is a nested list of d*d
-# contiguous arrays of shape (n,), a vector a list of d arrays. Elementwise numpy on
-# contiguous 1-D arrays is several times faster than on strided (n, d, d) views.
-Comp = list
-
-
-def _to_comp_mat(a: Array) -> list[list[Array]]:
-    d = a.shape[-1]
-    return [[np.ascontiguousarray(a[:, i, j]) for j in range(d)] for i in range(d)]
-
-
-def _to_comp_vec(v: Array) -> list[Array]:
-    return [np.ascontiguousarray(v[:, i]) for i in range(v.shape[-1])]
-
-
-def _comp_inv_sym(m: list[list[Array]]) -> list[list[Array]]:
-    """Inverse of symmetric matrices in component form (adjugate for d <= 3)."""
-    d = len(m)
-    if d == 1:
-        return [[1.0 / m[0][0]]]
-    if d == 2:
-        det = m[0][0] * m[1][1] - m[0][1] * m[0][1]
-        off = -m[0][1] / det
-        return [[m[1][1] / det, off], [off, m[0][0] / det]]
-    if d == 3:
-        a, b, c, dd, e, f = m[0][0], m[0][1], m[0][2], m[1][1], m[1][2], m[2][2]
-        c00 = dd * f - e * e
-        c01 = c * e - b * f
-        c02 = b * e - c * dd
-        det = a * c00 + b * c01 + c * c02
-        r = 1.0 / det
-        i00, i01, i02 = c00 * r, c01 * r, c02 * r
-        i11 = (a * f - c * c) * r
-        i12 = (b * c - a * e) * r
-        i22 = (a * dd - b * b) * r
-        return [[i00, i01, i02], [i01, i11, i12], [i02, i12, i22]]
-    dense = np.stack([np.stack(row, axis=-1) for row in m], axis=-2)
-    return _to_comp_mat(np.linalg.inv(dense))
-
-
-def _comp_det(m: list[list[Array]]) -> Array:
-    d = len(m)
-    if d == 1:
-        return m[0][0]
-    if d == 2:
-        return m[0][0] * m[1][1] - m[0][1] * m[0][1]
-    if d == 3:
-        a, b, c, dd, e, f = m[0][0], m[0][1], m[0][2], m[1][1], m[1][2], m[2][2]
-        return a * (dd * f - e * e) + b * (c * e - b * f) + c * (b * e - c * dd)
-    return np.linalg.det(np.stack([np.stack(row, axis=-1) for row in m], axis=-2))
-
-
-def _comp_pd(m: list[list[Array]]) -> NDArray[np.bool_]:
-    """Sylvester's criterion in component form (leading minors positive)."""
-    d = len(m)
-    if d > 3:
-        return _is_positive_definite(np.stack([np.stack(row, axis=-1) for row in m], axis=-2))
-    ok = m[0][0] > 0.0
-    if d >= 2:
-        ok &= m[0][0] * m[1][1] - m[0][1] * m[0][1] > 0.0
-    if d == 3:
-        ok &= _comp_det(m) > 0.0
-    return ok
-
-
-def _comp_mv(m: list[list[Array]], v: list[Array]) -> list[Array]:
-    return [sum(m[i][j] * v[j] for j in range(len(v))) for i in range(len(m))]
-
-
-def _comp_dot(a: list[Array], b: list[Array]) -> Array:
-    return sum(x * y for x, y in zip(a, b))
-
-
-def _comp_axpy(t: Array, s1: list[list[Array]], s2: list[list[Array]]) -> list[list[Array]]:
-    """``t S1 + S2`` in component form."""
-    return [[t * x + y for x, y in zip(r1, r2)] for r1, r2 in zip(s1, s2)]
+    Returns the means as ``(d, n)`` components and the validated :class:`CovariancePairs`,
+    broadcast to common leading dimensions.
+    """
+    m1, m2 = _checked("mu1", mu1, 1), _checked("mu2", mu2, 1)
+    c1, c2 = _checked("cov1", cov1, 2), _checked("cov2", cov2, 2)
+    d = m1.shape[-1]
+    if m2.shape[-1] != d:
+        raise InputError(f"mu1 and mu2 must have the same last dimension, got {m1.shape} and {m2.shape}")
+    for name, arr in (("cov1", c1), ("cov2", c2)):
+        if arr.shape[-2:] != (d, d):
+            raise InputError(f"{name} must have shape (..., {d}, {d}) to match the means, got {arr.shape}")
+    try:
+        lead = np.broadcast_shapes(m1.shape[:-1], m2.shape[:-1], c1.shape[:-2], c2.shape[:-2])
+    except ValueError as exc:
+        raise InputError(f"leading dimensions do not broadcast: {exc}") from None
+    pairs = CovariancePairs.from_arrays(c1, c2, lead)
+    return (K.vectors_to_components(np.broadcast_to(m1, lead + (d,))),
+            K.vectors_to_components(np.broadcast_to(m2, lead + (d,))), pairs)
 
 
 # --------------------------------------------------------------------------------------
@@ -341,8 +251,9 @@ class MinmaxResult:
     overlap : ``Y = 2 (1 - Phi(eta))``.
     confidence : contour of touch ``F_chi2_d(eta^2)``.
     normal : ``(..., d)`` unit normal ``alpha / |alpha|`` pointing from 1 towards 2. For
-        coincident means (``eta = 0``) every direction separates equally badly; the first
-        axis is returned.
+        coincident means (``eta = 0``) no direction separates: ``alpha`` and ``eta`` are
+        set to 0, and ``normal``, ``lam``, ``s1``, ``s2`` are those of means displaced
+        along the first axis (an arbitrary but deterministic choice).
     s1, s2 : ``sqrt(normal' S_k normal)``, the standard deviation of each Gaussian along the normal.
     eta_grad_mu1 : ``(..., d)`` gradient of ``eta`` with respect to ``mu1`` (envelope
         theorem on ``eta = max_n n.(mu2-mu1) / (s1(n) + s2(n))``): ``-normal / (s1 + s2)``.
@@ -383,24 +294,134 @@ def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> 
         Shapes that do not match, NaN or infinite entries, covariances that are not
         symmetric or not positive definite.
     """
-    m1, s1m, m2, s2m = _validate_pair(mu1, cov1, mu2, cov2, check_pd=False)
-    lead = m1.shape[:-1]
-    d = m1.shape[-1]
-    n = int(np.prod(lead, dtype=int))
-    m1f, m2f = m1.reshape(n, d), m2.reshape(n, d)
-    s1f, s2f = s1m.reshape(n, d, d), s2m.reshape(n, d, d)
-    S1, S2 = _to_comp_mat(s1f), _to_comp_mat(s2f)
-    _require_pd(_comp_pd(S1).reshape(lead), "cov1")
-    _require_pd(_comp_pd(S2).reshape(lead), "cov2")
-    delta = m2f - m1f
+    m1, m2, pairs = _validate_pair(mu1, cov1, mu2, cov2)
+    return _minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead)
+
+
+def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...]) -> MinmaxResult:
+    """:func:`minmax` on validated batch-last inputs: means (d, n), covariances (d, d, n)."""
+    d, n = m1.shape
+    delta = m2 - m1
     scale = np.sqrt(np.maximum(sum(S1[i][i] for i in range(d)), sum(S2[i][i] for i in range(d))))
-    coincident = np.sqrt(_dot(delta, delta)) <= 1e-15 * scale
+    coincident = np.sqrt(K.dot(delta, delta)) <= 1e-15 * scale
     # Keep the iteration well-defined for coincident means; they are patched at the end.
-    delta_it = np.where(coincident[:, None], np.eye(d)[0] * scale[:, None], delta)
-    dv = _to_comp_vec(delta_it)
+    dv = np.where(coincident[None, :], np.eye(d)[:, :1] * scale[None, :], delta) if np.any(coincident) else delta
 
     # Start at the geometric mean of the generalised eigenvalues of (S2, S1): exact when S2 = g S1.
-    u = 0.5 * (np.log(_comp_det(S2)) - np.log(_comp_det(S1))) / d
+    u = 0.5 * (np.log(K.det(S2)) - np.log(K.det(S1))) / d
+    if d == 3 and isinstance(S1, np.ndarray):
+        u = _newton_polynomial(S1, S2, np.asarray(dv), u)
+    else:
+        u = _newton_direct(S1, S2, dv, u)
+
+    t = np.exp(u)
+    lam = t / (1.0 + t)
+    a_inv = K.inv_sym(K.axpy(t, S1, S2))
+    x = K.mv(a_inv, dv)
+    q1 = K.dot(x, K.mv(S1, x))
+    q2 = K.dot(x, K.mv(S2, x))
+    eta1 = t * np.sqrt(q1)
+    eta2 = np.sqrt(q2)
+    eta = 0.5 * (eta1 + eta2)
+    residual = eta1 - eta2
+    alpha = [c * (1.0 + t) for c in x]  # (lam S1 + (1-lam) S2)^-1 delta = (1 + t) x
+    xn = np.sqrt(K.dot(x, x))
+    normal = [c / xn for c in x]
+    s1 = np.sqrt(q1) / xn
+    s2 = np.sqrt(q2) / xn
+    if np.any(coincident):
+        eta = np.where(coincident, 0.0, eta)
+        residual = np.where(coincident, 0.0, residual)
+        alpha = [np.where(coincident, 0.0, c) for c in alpha]
+    beta = K.dot(alpha, m1) + lam * K.quad(alpha, S1)
+    ssum = s1 + s2
+
+    def shaped(a: Array) -> Array:
+        return a.reshape(lead)
+
+    def shaped_vec(v: list[Array]) -> Array:
+        return K.from_components(v).reshape(lead + (d,))
+
+    return MinmaxResult(
+        lam=shaped(lam),
+        eta=shaped(eta),
+        alpha=shaped_vec(alpha),
+        beta=shaped(beta),
+        overlap=shaped(2.0 * special.ndtr(-eta)),
+        confidence=shaped(special.gammainc(d / 2.0, 0.5 * eta * eta)),
+        normal=shaped_vec(normal),
+        s1=shaped(s1),
+        s2=shaped(s2),
+        eta_grad_mu1=shaped_vec([-c / ssum for c in normal]),
+        residual=shaped(residual),
+    )
+
+
+def _safeguarded_step(u: Array, phi: Array, dphi: Array, lo: Array, hi: Array) -> tuple[Array, Array, Array]:
+    """One safeguarded Newton step on ``phi(u) = 0``: returns the new ``u`` and the updated bracket."""
+    lo = np.where(phi < 0.0, np.maximum(lo, u), lo)
+    hi = np.where(phi > 0.0, np.minimum(hi, u), hi)
+    step = -phi / dphi
+    new_u = u + step
+    # Safeguard: stay inside the bracket the signs have shown; bisect where Newton leaves it.
+    both = np.isfinite(lo) & np.isfinite(hi)
+    # A bracket end can sit within rounding of the root (phi ~ 1e-16 there); a Newton step
+    # that lands just beyond it is still good, so only a clear exit counts as leaving.
+    slack = 1e-12 * (1.0 + np.abs(u))
+    outside = (new_u < lo - slack) | (new_u > hi + slack)
+    midpoint = 0.5 * (np.where(both, lo, 0.0) + np.where(both, hi, 0.0))
+    new_u = np.where(outside & both, midpoint, new_u)
+    new_u = np.where(~both, u + np.clip(step, -4.0, 4.0), new_u)  # no two-sided bracket yet: cap every step
+    return new_u, lo, hi
+
+
+def _newton_polynomial(S1: Array, S2: Array, delta: Array, u: Array) -> Array:
+    """``u = log t`` solving ``phi(u) = 0`` for 3x3 pairs, with ``A(t)^-1 delta`` as a polynomial in ``t``.
+
+    ``adj(t S1 + S2) = t^2 adj(S1) + t M + adj(S2)`` with ``M = adj(S1 + S2) - adj(S1) - adj(S2)``,
+    so ``x`` is parallel to ``v(t) = t^2 a2 + t a1 + a0`` (``a2 = adj(S1) delta``, ...) and
+    ``phi(u) = 2u + log(v'S1v) - log(v'S2v)`` (the determinant cancels);
+    ``phi'(u) = 2 + 2t (v_t'S1v / v'S1v - v_t'S2v / v'S2v)``. Three matrix-vector
+    products per pair are computed once; each Newton step is a few whole-array operations.
+    All three adjugate terms are positive semidefinite, so ``v`` loses no precision to
+    cancellation beyond the covariances' condition number.
+    """
+    adj1, adj2 = K.adjugate3(S1), K.adjugate3(S2)
+    mixed = K.adjugate3(S1 + S2) - adj1 - adj2
+    a2, a1, a0 = K.matvec(adj1, delta), K.matvec(mixed, delta), K.matvec(adj2, delta)
+    n = u.shape[0]
+    lo = np.full(n, -np.inf)
+    hi = np.full(n, np.inf)
+    idx = None  # all pairs iterate until the first converge, then only the rest
+    for _ in range(_MAX_NEWTON):
+        ua = u if idx is None else u[idx]
+        t = np.exp(ua)
+        v = (a2 * t + a1) * t + a0
+        vt = (2.0 * t) * a2 + a1
+        s1v, s2v = K.matvec(S1, v), K.matvec(S2, v)
+        n1, n2 = K.dots(v, s1v), K.dots(v, s2v)
+        phi = 2.0 * ua + np.log(n1 / n2)
+        dphi = 2.0 + 2.0 * t * (K.dots(vt, s1v) / n1 - K.dots(vt, s2v) / n2)
+        la, ha = (lo, hi) if idx is None else (lo[idx], hi[idx])
+        new_u, la, ha = _safeguarded_step(ua, phi, dphi, la, ha)
+        keep = np.abs(new_u - ua) > _U_TOL * np.maximum(1.0, np.abs(ua))
+        if idx is None:
+            u, lo, hi = new_u, la, ha
+        else:
+            u[idx], lo[idx], hi[idx] = new_u, la, ha
+        if not np.any(keep):
+            return u
+        if not np.all(keep):
+            idx = np.flatnonzero(keep) if idx is None else idx[keep]
+            S1, S2, a2, a1, a0 = S1[:, :, keep], S2[:, :, keep], a2[:, keep], a1[:, keep], a0[:, keep]
+    logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", _MAX_NEWTON, n if idx is None else idx.size)
+    return u
+
+
+def _newton_direct(S1, S2, dv, u: Array) -> Array:
+    """``u = log t`` solving ``phi(u) = 0`` for any dimension, solving ``A(t) x = delta`` at each step."""
+    n = u.shape[0]
+    u = u.copy()
     lo = np.full(n, -np.inf)
     hi = np.full(n, np.inf)
     idx = np.arange(n)  # pairs still iterating
@@ -408,79 +429,25 @@ def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> 
     for _ in range(_MAX_NEWTON):
         ua = u[idx]
         t = np.exp(ua)
-        a_inv = _comp_inv_sym(_comp_axpy(t, S1a, S2a))
-        x = _comp_mv(a_inv, da)
-        y = _comp_mv(S1a, x)
-        q1 = _comp_dot(x, y)
-        q2 = _comp_dot(x, _comp_mv(S2a, x))
-        w = _comp_dot(y, _comp_mv(a_inv, y))
+        a_inv = K.inv_sym(K.axpy(t, S1a, S2a))
+        x = K.mv(a_inv, da)
+        y = K.mv(S1a, x)
+        q1 = K.dot(x, y)
+        q2 = K.dot(x, K.mv(S2a, x))
+        w = K.dot(y, K.mv(a_inv, y))
         v = q1 - t * w
         phi = 2.0 * ua + np.log(q1) - np.log(q2)  # log(eta1^2 / eta2^2), increasing in u
         dphi = 2.0 - 2.0 * t * w / q1 + 2.0 * t * v / q2
-        la = np.where(phi < 0.0, np.maximum(lo[idx], ua), lo[idx])
-        ha = np.where(phi > 0.0, np.minimum(hi[idx], ua), hi[idx])
-        lo[idx], hi[idx] = la, ha
-        step = -phi / dphi
-        new_u = ua + step
-        # Safeguard: stay inside the bracket the signs have shown; bisect where Newton leaves it.
-        both = np.isfinite(la) & np.isfinite(ha)
-        # A bracket end can sit within rounding of the root (phi ~ 1e-16 there); a Newton step
-        # that lands just beyond it is still good, so only a clear exit counts as leaving.
-        slack = 1e-12 * (1.0 + np.abs(ua))
-        outside = (new_u < la - slack) | (new_u > ha + slack)
-        midpoint = 0.5 * (np.where(both, la, 0.0) + np.where(both, ha, 0.0))
-        new_u = np.where(outside & both, midpoint, new_u)
-        new_u = np.where(~both, ua + np.clip(step, -4.0, 4.0), new_u)  # no two-sided bracket yet: cap every step
+        new_u, lo[idx], hi[idx] = _safeguarded_step(ua, phi, dphi, lo[idx], hi[idx])
         u[idx] = new_u
         keep = np.abs(new_u - ua) > _U_TOL * np.maximum(1.0, np.abs(ua))
         if not np.any(keep):
-            break
+            return u
         if not np.all(keep):
             idx = idx[keep]
-            S1a = [[c[keep] for c in row] for row in S1a]
-            S2a = [[c[keep] for c in row] for row in S2a]
-            da = [c[keep] for c in da]
-    else:  # pragma: no cover - the iteration is proven to converge; keep a trace if it ever does not
-        logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", _MAX_NEWTON, idx.size)
-
-    t = np.exp(u)
-    lam = t / (1.0 + t)
-    a_inv = _comp_inv_sym(_comp_axpy(t, S1, S2))
-    xc = _comp_mv(a_inv, dv)
-    q1 = _comp_dot(xc, _comp_mv(S1, xc))
-    q2 = _comp_dot(xc, _comp_mv(S2, xc))
-    x = np.stack(xc, axis=-1)
-    eta1 = t * np.sqrt(q1)
-    eta2 = np.sqrt(q2)
-    eta = 0.5 * (eta1 + eta2)
-    residual = eta1 - eta2
-    alpha = x * (1.0 + t)[:, None]  # (lam S1 + (1-lam) S2)^-1 delta = (1 + t) x
-    xn = np.sqrt(_dot(x, x))
-    normal = x / xn[:, None]
-    s1 = np.sqrt(q1) / xn
-    s2 = np.sqrt(q2) / xn
-    if np.any(coincident):
-        eta = np.where(coincident, 0.0, eta)
-        residual = np.where(coincident, 0.0, residual)
-        alpha = np.where(coincident[:, None], 0.0, alpha)
-    beta = _dot(alpha, m1f) + lam * _quad(alpha, s1f)
-
-    def shaped(a: Array) -> Array:
-        return a.reshape(lead + a.shape[1:])
-
-    return MinmaxResult(
-        lam=shaped(lam),
-        eta=shaped(eta),
-        alpha=shaped(alpha),
-        beta=shaped(beta),
-        overlap=shaped(2.0 * special.ndtr(-eta)),
-        confidence=shaped(special.gammainc(d / 2.0, 0.5 * eta * eta)),
-        normal=shaped(normal),
-        s1=shaped(s1),
-        s2=shaped(s2),
-        eta_grad_mu1=shaped(-normal / (s1 + s2)[:, None]),
-        residual=shaped(residual),
-    )
+            S1a, S2a, da = K.take(S1a, keep), K.take(S2a, keep), K.take(da, keep)
+    logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", _MAX_NEWTON, idx.size)
+    return u
 
 
 def support_margin(
@@ -494,12 +461,37 @@ def support_margin(
     + ball(R_k)``; the minmax normal is the tightest for ``R = 0``, where this equals ``eta``.
     Under ``margin >= r`` the collision probability at that instant is at most ``Phi(-r)``.
     """
-    m1, s1m, m2, s2m = _validate_pair(mu1, cov1, mu2, cov2)
-    n = np.asarray(normal, dtype=float)
-    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
-    s1 = np.sqrt(_quad(n, s1m))
-    s2 = np.sqrt(_quad(n, s2m))
-    return (_dot(n, m2 - m1) - np.asarray(radius_sum, dtype=float)) / (s1 + s2)
+    n = _checked("normal", normal, 1)
+    m1, m2, pairs = _validate_pair(*_broadcast_means(mu1, cov1, mu2, cov2, n.shape[:-1], np.shape(radius_sum)))
+    lead, d = pairs.lead, pairs.dim
+    radius = np.asarray(radius_sum, dtype=float)
+    return _support_margin(m1, m2, pairs, K.vectors_to_components(np.broadcast_to(n, lead + (d,))),
+                           np.broadcast_to(radius, lead).ravel()).reshape(lead)
+
+
+def _broadcast_means(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike,
+                     *extra: tuple[int, ...]) -> tuple[Array, ArrayLike, ArrayLike, ArrayLike]:
+    """``mu1`` broadcast so that the pair also covers the leading shapes ``extra`` (normals, radii)."""
+    m1 = _checked("mu1", mu1, 1)
+    try:
+        lead = np.broadcast_shapes(m1.shape[:-1], *extra)
+    except ValueError as exc:
+        raise InputError(f"leading dimensions do not broadcast: {exc}") from None
+    return np.broadcast_to(m1, lead + m1.shape[-1:]), cov1, mu2, cov2
+
+
+def _support_margin(m1: Array, m2: Array, pairs: CovariancePairs, normal: Array, radius: Array,
+                    spread: Array | None = None) -> Array:
+    """:func:`support_margin` on validated components (means and normals (d, n), radii (n,)).
+
+    ``spread``: ``s1 + s2`` along ``normal`` when the caller has it (then ``normal`` must
+    be unit already, as minmax's is); computed here otherwise.
+    """
+    n = normal
+    if spread is None:
+        n = normal / np.sqrt(K.dot(normal, normal))
+        spread = np.sqrt(K.quad(n, pairs.s1)) + np.sqrt(K.quad(n, pairs.s2))
+    return (K.dot(n, m2 - m1) - radius) / spread
 
 
 def contour_of_touch(
@@ -511,10 +503,13 @@ def contour_of_touch(
     inflated bodies already overlap at radius 0). Exact for ``radius_sum = 0``; with radii
     it is the contour the planner's constraint guarantees, a lower bound of the exact one.
     """
-    res = minmax(mu1, cov1, mu2, cov2)
-    m1, s1m, m2, s2m = _validate_pair(mu1, cov1, mu2, cov2)
-    margin = (_dot(res.normal, m2 - m1) - np.asarray(radius_sum, dtype=float)) / (res.s1 + res.s2)
-    d = m1.shape[-1]
+    radius = np.asarray(radius_sum, dtype=float)
+    m1, m2, pairs = _validate_pair(*_broadcast_means(mu1, cov1, mu2, cov2, radius.shape))
+    lead, d = pairs.lead, pairs.dim
+    res = _minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead)
+    normal = K.vectors_to_components(res.normal)
+    margin = _support_margin(m1, m2, pairs, normal, np.broadcast_to(radius, lead).ravel(),
+                             (res.s1 + res.s2).ravel()).reshape(lead)
     return special.gammainc(d / 2.0, 0.5 * np.square(np.maximum(margin, 0.0)))
 
 
@@ -525,17 +520,19 @@ def contour_of_touch(
 
 def bhattacharyya(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> Array | float:
     """Bhattacharyya distance ``1/8 dmu' S^-1 dmu + 1/2 ln(det S / sqrt(det S1 det S2))``, ``S = (S1 + S2)/2``."""
-    m1, s1m, m2, s2m = _validate_pair(mu1, cov1, mu2, cov2)
-    s = 0.5 * (s1m + s2m)
-    delta = m2 - m1
-    db = 0.125 * _quad(delta, _inv(s)) + 0.5 * (np.log(_det(s)) - 0.5 * (np.log(_det(s1m)) + np.log(_det(s2m))))
+    m1, m2, pairs = _validate_pair(mu1, cov1, mu2, cov2)
+    s = K.combine(0.5, pairs.s1, 0.5, pairs.s2)
+    db = 0.125 * K.quad(m2 - m1, K.inv_sym(s)) + 0.5 * (
+        np.log(K.det(s)) - 0.5 * (np.log(K.det(pairs.s1)) + np.log(K.det(pairs.s2))))
+    db = db.reshape(pairs.lead)
     return float(db) if db.ndim == 0 else db
 
 
 def bhattacharyya_grad_mu1(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> Array:
     """Gradient of :func:`bhattacharyya` with respect to ``mu1``: ``-1/4 S^-1 (mu2 - mu1)``."""
-    m1, s1m, m2, s2m = _validate_pair(mu1, cov1, mu2, cov2)
-    return -0.25 * _mv(_inv(0.5 * (s1m + s2m)), m2 - m1)
+    m1, m2, pairs = _validate_pair(mu1, cov1, mu2, cov2)
+    g = K.mv(K.inv_sym(K.combine(0.5, pairs.s1, 0.5, pairs.s2)), m2 - m1)
+    return -0.25 * K.from_components(g).reshape(pairs.lead + (len(g),))
 
 
 # --------------------------------------------------------------------------------------
@@ -577,34 +574,39 @@ def paper_terms(
     With ``A = lam S1 + (1-lam) S2``: ``d alpha / d mu1 = -A^-1`` and
     ``d alpha / d lam = -A^-1 (S1 - S2) alpha``; the rest is the chain rule.
     """
-    m1, s1m, m2, s2m = _validate_pair(mu1, cov1, mu2, cov2)
+    m1, m2, pairs = _validate_pair(mu1, cov1, mu2, cov2)
     lam_a = np.asarray(lam, dtype=float)
     if not np.all(np.isfinite(lam_a)) or np.any(lam_a <= 0.0) or np.any(lam_a >= 1.0):
         raise InputError("lam must lie in the open interval (0, 1)")
-    lam_a = np.broadcast_to(lam_a, m1.shape[:-1])
-    radius = np.broadcast_to(np.asarray(radius_sum, dtype=float), m1.shape[:-1])
+    lead = pairs.lead
+    lam_a = np.broadcast_to(lam_a, lead).ravel()
+    radius = np.broadcast_to(np.asarray(radius_sum, dtype=float), lead).ravel()
     delta = m2 - m1
-    a_inv = _inv(lam_a[..., None, None] * s1m + (1.0 - lam_a)[..., None, None] * s2m)
-    alpha = _mv(a_inv, delta)
-    s1a = _mv(s1m, alpha)
-    s2a = _mv(s2m, alpha)
-    q1 = _dot(alpha, s1a)
-    q2 = _dot(alpha, s2a)
+    a_inv = K.inv_sym(K.combine(lam_a, pairs.s1, 1.0 - lam_a, pairs.s2))
+    alpha = np.array(K.mv(a_inv, delta))
+    s1a = np.array(K.mv(pairs.s1, alpha))
+    s2a = np.array(K.mv(pairs.s2, alpha))
+    q1 = K.dot(alpha, s1a)
+    q2 = K.dot(alpha, s2a)
     r1, r2 = np.sqrt(q1), np.sqrt(q2)
-    na = np.sqrt(_dot(alpha, alpha))
+    na = np.sqrt(K.dot(alpha, alpha))
     den = r1 + r2
-    num = _dot(alpha, delta) - radius * na
+    num = K.dot(alpha, delta) - radius * na
     h = num / den
     # dh/dalpha = (delta - R alpha/|alpha|)/den - num/den^2 (S1 alpha/sqrt(q1) + S2 alpha/sqrt(q2))
-    dh_dalpha = (delta - (radius / na)[..., None] * alpha) / den[..., None] - (num / den**2)[..., None] * (
-        s1a / r1[..., None] + s2a / r2[..., None]
-    )
-    dalpha_dlam = -_mv(a_inv, s1a - s2a)
-    h_grad_mu1 = -alpha / den[..., None] - _mv(a_inv, dh_dalpha)  # d delta/d mu1 = -I, d alpha/d mu1 = -A^-1
-    h_grad_lam = _dot(dh_dalpha, dalpha_dlam)
+    dh_dalpha = (delta - (radius / na) * alpha) / den - (num / den**2) * (s1a / r1 + s2a / r2)
+    dalpha_dlam = -np.array(K.mv(a_inv, s1a - s2a))
+    h_grad_mu1 = -alpha / den - np.array(K.mv(a_inv, dh_dalpha))  # d delta/d mu1 = -I, d alpha/d mu1 = -A^-1
+    h_grad_lam = K.dot(dh_dalpha, dalpha_dlam)
     # g = lam^2 q1 - (1-lam)^2 q2
     g = lam_a**2 * q1 - (1.0 - lam_a) ** 2 * q2
-    dg_dalpha = 2.0 * lam_a[..., None] ** 2 * s1a - 2.0 * (1.0 - lam_a)[..., None] ** 2 * s2a
-    g_grad_mu1 = -_mv(a_inv, dg_dalpha)
-    g_grad_lam = 2.0 * lam_a * q1 + 2.0 * (1.0 - lam_a) * q2 + _dot(dg_dalpha, dalpha_dlam)
-    return PaperTerms(h=h, h_grad_mu1=h_grad_mu1, h_grad_lam=h_grad_lam, g=g, g_grad_mu1=g_grad_mu1, g_grad_lam=g_grad_lam)
+    dg_dalpha = 2.0 * lam_a**2 * s1a - 2.0 * (1.0 - lam_a) ** 2 * s2a
+    g_grad_mu1 = -np.array(K.mv(a_inv, dg_dalpha))
+    g_grad_lam = 2.0 * lam_a * q1 + 2.0 * (1.0 - lam_a) * q2 + K.dot(dg_dalpha, dalpha_dlam)
+    d = delta.shape[0]
+
+    def vec(v: Array) -> Array:
+        return v.T.reshape(lead + (d,))
+
+    return PaperTerms(h=h.reshape(lead), h_grad_mu1=vec(h_grad_mu1), h_grad_lam=h_grad_lam.reshape(lead),
+                      g=g.reshape(lead), g_grad_mu1=vec(g_grad_mu1), g_grad_lam=g_grad_lam.reshape(lead))

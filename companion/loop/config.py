@@ -1,23 +1,28 @@
-"""The companion's view of a scenario file: mission, planner, estimator, map and loop settings.
+"""The companion's view of a scenario file: mission, planner, estimator, map, loop and offboard settings.
 
 The companion reads ``[scenario]``, ``[vehicle]``, ``[mission]``, ``[planner]``,
-``[estimator]`` (with ``[estimator.drone]`` and ``[estimator.tracker]``), ``[map]`` and
-``[companion]``. It never reads ``[[world.obstacles]]``: moving obstacles are learnt from
-MAVLink, as in the field. Unknown keys in the sections it owns are errors that name the
-file, the section and the key. Units: NED metres, seconds.
+``[estimator]`` (with ``[estimator.drone]`` and ``[estimator.tracker]``), ``[map]``,
+``[companion]`` and ``[offboard]``. It never uses ``[sim]`` or ``[world]`` (mavsim's:
+moving obstacles are learnt from MAVLink, as in the field), but it rejects unknown keys
+there too, against :data:`SIMULATOR_KEYS` (a declared copy of mavsim's schema that a test
+holds equal to mavsim's own), so the companion never silently accepts a file mavsim
+rejects. Every section is validated at load with :mod:`companion.validation`; errors name
+the file, the section and the key. Sizes are bounded (file bytes, walls, static
+obstacles; horizon and iterations in :mod:`companion.core.planner.config`). Units: NED
+metres, seconds. docs/CONFIGURATION.md lists every key.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 
+from companion import validation as check
 from companion.errors import ConfigError
 from companion.mavlink.offboard import OffboardConfig
 from companion.core.planner.config import PlannerConfig
@@ -26,42 +31,59 @@ from estimator import DroneFilterConfig, EstimatorConfigError, TrackerConfig
 
 logger = logging.getLogger(__name__)
 
-_TOP_LEVEL = {"scenario", "vehicle", "mission", "planner", "estimator", "map", "companion", "sim", "world", "traffic"}
+#: Largest scenario file read (bytes): the shipped ones are a few kB.
+MAX_SCENARIO_BYTES = 1 << 20
+#: Largest number of ``[[map.walls]]`` and ``[[map.static_obstacles]]``.
+MAX_WALLS = 64
+MAX_STATIC_OBSTACLES = 256
+
+_COMPANION_SECTIONS = {"scenario", "vehicle", "mission", "planner", "estimator", "map", "companion", "offboard", "traffic"}
+
+#: Keys of the sections mavsim owns, by section (``world.obstacles`` is each ``[[world.obstacles]]``).
+#: mavsim validates their values; tests/loop/test_config.py holds this equal to mavsim's schema.
+SIMULATOR_KEYS: dict[str, frozenset[str]] = {
+    "sim": frozenset({
+        "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2",
+        "position_noise_correlation_s", "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
+        "home_lat_deg", "home_lon_deg", "home_alt_m", "arming_delay_s", "offboard_reject_ack",
+        "params", "stream_rates_hz",
+    }),
+    "world": frozenset({"obstacles", "obstacle_sysid_base", "obstacle_compid"}),
+    "world.obstacles": frozenset({
+        "name", "radius_m", "start_ned_m", "velocity_ned_mps", "waypoints_ned_m", "speed_mps", "loop",
+        "measurement_cov_m2", "velocity_cov_m2ps2", "report_rate_hz", "start_delay_s",
+        "transport", "message", "clock_offset_s", "clock_drift", "icao_address", "emitter_type",
+        "clock_reboot_at_s", "garbage_stamp_at_s",
+    }),
+}
 
 
-def _vec3(value: Any, where: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=float) if isinstance(value, (list, tuple)) else None
-    if arr is None or arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{where}: expected three finite numbers (NED), got {value!r}")
-    return arr
+def read_scenario_toml(path: str | Path) -> dict[str, Any]:
+    """The parsed TOML of a scenario file (at most :data:`MAX_SCENARIO_BYTES`, UTF-8).
 
-
-def _cov3(value: Any, where: str) -> np.ndarray:
+    Raises
+    ------
+    ConfigError
+        Missing, a directory, unreadable, too large, not UTF-8 or not TOML (names the file).
+    """
+    path = Path(path)
     try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        arr = None
-    if arr is None or arr.shape != (3, 3) or not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{where}: expected a 3x3 covariance matrix, got {value!r}")
-    if not np.allclose(arr, arr.T, atol=1e-12) or np.any(np.linalg.eigvalsh(arr) <= 0.0):
-        raise ConfigError(f"{where}: covariance must be symmetric positive definite, got {value!r}")
-    return arr
-
-
-def _number(value: Any, where: str, *, positive: bool = False, nonnegative: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"{where}: expected a finite number, got {value!r}")
-    if positive and value <= 0:
-        raise ConfigError(f"{where}: must be > 0, got {value!r}")
-    if nonnegative and value < 0:
-        raise ConfigError(f"{where}: must be >= 0, got {value!r}")
-    return float(value)
-
-
-def _check_keys(table: Mapping[str, Any], allowed: set[str], where: str) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(allowed))})")
+        with path.open("rb") as f:
+            raw = f.read(MAX_SCENARIO_BYTES + 1)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: scenario file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a directory, not a scenario file") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read scenario file: {exc.strerror or exc}") from None
+    if len(raw) > MAX_SCENARIO_BYTES:
+        raise ConfigError(f"{path}: scenario file larger than {MAX_SCENARIO_BYTES} bytes")
+    try:
+        return tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not a UTF-8 text file (byte offset {exc.start})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -83,11 +105,26 @@ class StaticObstacle:
 
 @dataclass(frozen=True)
 class MissionConfig:
-    """Where to go: the goal (NED, m), when it counts as reached, and waypoint spacing (m)."""
+    """Where to go (``[mission]``): the goal (NED, m), when it counts as reached, and waypoint spacing (m).
 
-    goal: np.ndarray
-    goal_tolerance_m: float = 0.3
+    ``goal_tolerance_m`` has no default: mavsim reads the same key for its truth
+    (time to goal), so the scenario file is its one source.
+    """
+
+    goal_ned_m: np.ndarray
+    goal_tolerance_m: float
     waypoint_spacing_m: float = 6.0
+
+    def __post_init__(self) -> None:
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
+        set_("goal_ned_m", check.vector3("goal_ned_m", self.goal_ned_m))
+        set_("goal_tolerance_m", check.number("goal_tolerance_m", self.goal_tolerance_m, positive=True, hi=1000.0))
+        set_("waypoint_spacing_m", check.number("waypoint_spacing_m", self.waypoint_spacing_m, positive=True, hi=1e4))
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The goal position (NED, m)."""
+        return self.goal_ned_m
 
 
 @dataclass(frozen=True)
@@ -96,9 +133,9 @@ class LoopConfig:
 
     Attributes
     ----------
-    setpoint_rate_hz : rate of SET_POSITION_TARGET_LOCAL_NED while streaming (>= 10 Hz).
-    estimate_timeout_s : drone estimate older than this is stale: brake.
-    obstacle_radius_m : body radius assumed for tracked obstacles (MAVLink does not carry one).
+    setpoint_rate_hz : rate of SET_POSITION_TARGET_LOCAL_NED while streaming, Hz, in [10, 100].
+    estimate_timeout_s : drone estimate older than this is stale: brake (s, > 0, <= 60).
+    obstacle_radius_m : body radius assumed for tracked obstacles (MAVLink does not carry one), m.
     drone_covariance : where the drone's planning covariance comes from, held over the horizon
         (the autopilot closes the loop, so open-loop growth does not apply):
         ``"reported"`` (default) uses the autopilot's own estimate covariance from
@@ -106,12 +143,17 @@ class LoopConfig:
         so re-filtering them as independent measurements would be overconfident), and
         the filter's covariance while none is reported; ``"estimate"`` always uses the
         companion filter's covariance; ``"predicted"`` uses its open-loop prediction.
-    drone_cov_floor_m2 : isotropic floor added to the drone's planning covariance.
+    drone_cov_floor_m2 : isotropic floor added to the drone's planning covariance, m^2.
+    max_constrained_tracks : most obstacle tracks one replan constrains, in [1, 64]; the riskiest
+        are chosen (:mod:`companion.loop.track_selection`), the rest counted and reported.
+    max_plan_age_s : link seconds after its request past which a plan is no longer flown
+        (the stream brakes within the acceleration bound until a newer plan arrives), in (0, 10].
 
-    prestream_s, retry_period_s, max_retries, reengage : OFFBOARD engagement (see ``companion.mavlink.offboard``).
     setpoint_kind : ``"velocity"`` (default) streams the plan's velocity commands;
         ``"position_velocity"`` streams the plan's position with its velocity as feed-forward
         while tracking a plan (PX4's position loop removes the slow tail of its velocity response).
+
+    OFFBOARD engagement is the ``[offboard]`` table (:class:`companion.mavlink.offboard.OffboardConfig`).
     """
 
     setpoint_rate_hz: float = 20.0
@@ -119,24 +161,20 @@ class LoopConfig:
     obstacle_radius_m: float = 0.5
     drone_covariance: str = "reported"
     drone_cov_floor_m2: float = 0.0
-    prestream_s: float = 1.0
-    retry_period_s: float = 1.0
-    max_retries: int = 5
-    reengage: bool = False
+    max_plan_age_s: float = 1.0
+    max_constrained_tracks: int = 8
     setpoint_kind: str = "velocity"
 
-    def offboard_config(self, **overrides: object) -> OffboardConfig:
-        """The engagement settings of this loop, with ``overrides`` (e.g. ``arm``, ``takeoff_alt_m``)."""
-        base = dict(prestream_s=self.prestream_s, retry_period_s=self.retry_period_s, max_retries=self.max_retries, reengage=self.reengage)
-        return OffboardConfig(**{**base, **overrides})
-
     def __post_init__(self) -> None:
-        if not self.setpoint_rate_hz >= 10.0:
-            raise ConfigError(f"[companion] setpoint_rate_hz must be >= 10 Hz (PX4 needs > 2 Hz), got {self.setpoint_rate_hz!r}")
-        if self.setpoint_kind not in ("velocity", "position_velocity"):
-            raise ConfigError(f"[companion] setpoint_kind must be 'velocity' or 'position_velocity', got {self.setpoint_kind!r}")
-        if self.drone_covariance not in ("reported", "estimate", "predicted"):
-            raise ConfigError(f"[companion] drone_covariance must be 'reported', 'estimate' or 'predicted', got {self.drone_covariance!r}")
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
+        set_("setpoint_rate_hz", check.number("setpoint_rate_hz", self.setpoint_rate_hz, lo=10.0, hi=100.0))
+        set_("estimate_timeout_s", check.number("estimate_timeout_s", self.estimate_timeout_s, positive=True, hi=60.0))
+        set_("obstacle_radius_m", check.number("obstacle_radius_m", self.obstacle_radius_m, lo=0.0, hi=100.0))
+        check.choice("drone_covariance", self.drone_covariance, ("reported", "estimate", "predicted"))
+        set_("drone_cov_floor_m2", check.number("drone_cov_floor_m2", self.drone_cov_floor_m2, lo=0.0, hi=100.0))
+        check.choice("setpoint_kind", self.setpoint_kind, ("velocity", "position_velocity"))
+        set_("max_plan_age_s", check.number("max_plan_age_s", self.max_plan_age_s, positive=True, hi=10.0))
+        set_("max_constrained_tracks", check.integer("max_constrained_tracks", self.max_constrained_tracks, lo=1, hi=64))
 
 
 @dataclass(frozen=True)
@@ -153,6 +191,7 @@ class CompanionScenario:
     drone_filter: DroneFilterConfig
     tracker: TrackerConfig
     loop: LoopConfig
+    offboard: OffboardConfig = field(default_factory=OffboardConfig)
     walls: tuple[Wall, ...] = field(default_factory=tuple)
     static_obstacles: tuple[StaticObstacle, ...] = field(default_factory=tuple)
     traffic: TrafficConfig = field(default_factory=TrafficConfig)
@@ -167,112 +206,124 @@ class CompanionScenario:
 
 
 def load_scenario(path: str | Path, **planner_overrides: Any) -> CompanionScenario:
-    """Read the companion's sections of a scenario TOML file.
+    """Read the companion's sections of a scenario TOML file (see :func:`scenario_from_dict`).
+
+    Raises
+    ------
+    ConfigError
+        The file cannot be read or parsed, or a section has a bad value or an unknown
+        key (the message names the file, section and key).
+    """
+    return scenario_from_dict(read_scenario_toml(path), Path(path), **planner_overrides)
+
+
+def _section(data: Mapping[str, Any], name: str, where: str) -> Mapping[str, Any]:
+    return check.table(f"{where} [{name}]", data.get(name, {}))
+
+
+def _check_simulator_keys(data: Mapping[str, Any], path: Path) -> None:
+    """Unknown keys of mavsim's sections, by the declared schema (mavsim checks the values)."""
+    check.check_keys(f"{path} [sim]", _section(data, "sim", str(path)), SIMULATOR_KEYS["sim"])
+    world = _section(data, "world", str(path))
+    check.check_keys(f"{path} [world]", world, SIMULATOR_KEYS["world"])
+    obstacles = check.array_of_tables(f"{path} [[world.obstacles]]", world.get("obstacles", []), max_len=254)
+    for i, ob in enumerate(obstacles):
+        check.check_keys(f"{path} [[world.obstacles]] #{i + 1}", ob, SIMULATOR_KEYS["world.obstacles"])
+
+
+def _map(data: Mapping[str, Any], path: Path) -> tuple[tuple[Wall, ...], tuple[StaticObstacle, ...]]:
+    map_t = dict(_section(data, "map", str(path)))
+    walls_t = check.array_of_tables(f"{path} [[map.walls]]", map_t.pop("walls", []), max_len=MAX_WALLS)
+    statics_t = check.array_of_tables(f"{path} [[map.static_obstacles]]", map_t.pop("static_obstacles", []),
+                                      max_len=MAX_STATIC_OBSTACLES)
+    check.check_keys(f"{path} [map]", map_t, set())
+    walls, statics = [], []
+    for i, w in enumerate(walls_t):
+        where = f"{path} [[map.walls]] #{i + 1}"
+        check.check_keys(where, w, {"normal_ned", "offset_m"})
+        try:
+            normal = check.vector3("normal_ned", w.get("normal_ned"))
+            offset = check.number("offset_m", w.get("offset_m"), lo=-1e6, hi=1e6)
+            norm = float(np.linalg.norm(normal))
+            if norm == 0.0:
+                raise ConfigError("normal_ned must not be zero")
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+        walls.append(Wall(normal / norm, offset / norm))
+    for i, st in enumerate(statics_t):
+        where = f"{path} [[map.static_obstacles]] #{i + 1}"
+        check.check_keys(where, st, {"center_ned_m", "radius_m", "covariance_m2"})
+        try:
+            statics.append(StaticObstacle(
+                center=check.vector3("center_ned_m", st.get("center_ned_m")),
+                radius=check.number("radius_m", st.get("radius_m", 0.5), lo=0.0, hi=1000.0),
+                covariance=check.covariance3("covariance_m2", st.get("covariance_m2", np.eye(3).tolist())),
+            ))
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+    return tuple(walls), tuple(statics)
+
+
+def scenario_from_dict(data: Mapping[str, Any], path: str | Path = "<dict>", **planner_overrides: Any) -> CompanionScenario:
+    """The companion's scenario from parsed TOML (``path`` names the file, or the source, in errors).
 
     Parameters
     ----------
-    path : path of the TOML file.
+    data : the parsed file (:func:`read_scenario_toml`, or a generated scenario).
+    path : where it came from (a file, or e.g. ``"<scenario name>"``).
     **planner_overrides : values that replace ``[planner]`` keys (e.g. ``formulation``).
-
-    Raises
-    ------
-    ConfigError
-        The file is missing or not TOML, or a section the companion owns has an unknown
-        key or a bad value (the message names the file, section and key).
     """
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: scenario file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
-    return scenario_from_dict(data, str(path), **planner_overrides)
-
-
-def scenario_from_dict(data: dict[str, Any], source: str = "<dict>", **planner_overrides: Any) -> CompanionScenario:
-    """The companion's sections of a parsed scenario (``tomllib`` output; ``source`` names it in errors).
-
-    Raises
-    ------
-    ConfigError
-        As :func:`load_scenario`, naming ``source`` instead of a file.
-    """
-    path = Path(source)
-    unknown = sorted(set(data) - _TOP_LEVEL)
+    where = str(path)
+    check.table(where, data)
+    unknown = sorted(set(data) - _COMPANION_SECTIONS - set(SIMULATOR_KEYS))
     if unknown:
         raise ConfigError(f"{path}: unknown section(s) {', '.join(unknown)}")
+    _check_simulator_keys(data, path)
 
-    sc = data.get("scenario", {})
-    _check_keys(sc, {"name", "description", "duration_s"}, f"{path} [scenario]")
-    vehicle = data.get("vehicle", {})
-    _check_keys(vehicle, {"radius_m", "start_ned_m"}, f"{path} [vehicle]")
-    drone_radius = _number(vehicle.get("radius_m", 0.5), f"{path} [vehicle] radius_m", positive=True)
+    sc = _section(data, "scenario", where)
+    check.check_keys(f"{path} [scenario]", sc, {"name", "description", "duration_s"})
+    try:
+        name = check.text("name", sc.get("name", path.stem), max_len=200)
+        description = check.text("description", sc.get("description", ""))
+        duration_s = check.number("duration_s", sc.get("duration_s", 60.0), positive=True, hi=86_400.0)
+    except ConfigError as exc:
+        raise ConfigError(f"{path} [scenario]: {exc}") from None
+    vehicle = _section(data, "vehicle", where)
+    check.check_keys(f"{path} [vehicle]", vehicle, {"radius_m", "start_ned_m"})
+    try:
+        drone_radius = check.number("radius_m", vehicle.get("radius_m", 0.5), positive=True, hi=100.0)
+        if "start_ned_m" in vehicle:
+            check.vector3("start_ned_m", vehicle["start_ned_m"])
+    except ConfigError as exc:
+        raise ConfigError(f"{path} [vehicle]: {exc}") from None
 
-    mission_t = data.get("mission")
-    if mission_t is None or "goal_ned_m" not in mission_t:
-        raise ConfigError(f"{path} [mission]: goal_ned_m is required")
-    _check_keys(mission_t, {f.name for f in fields(MissionConfig)} - {"goal"} | {"goal_ned_m"}, f"{path} [mission]")
-    mission = MissionConfig(
-        goal=_vec3(mission_t["goal_ned_m"], f"{path} [mission] goal_ned_m"),
-        goal_tolerance_m=_number(mission_t.get("goal_tolerance_m", 0.3), f"{path} [mission] goal_tolerance_m", positive=True),
-        waypoint_spacing_m=_number(mission_t.get("waypoint_spacing_m", 6.0), f"{path} [mission] waypoint_spacing_m", positive=True),
-    )
+    mission_t = _section(data, "mission", where)
+    for required in ("goal_ned_m", "goal_tolerance_m"):
+        if required not in mission_t:
+            raise ConfigError(f"{path} [mission]: {required} is required")
+    mission = check.build_section(MissionConfig, mission_t, f"{path} [mission]")
 
     overrides = {"drone_radius_m": drone_radius, **planner_overrides}
-    planner = PlannerConfig.from_toml_table(data.get("planner", {}), source=f"{path} [planner]", **overrides)
+    planner = PlannerConfig.from_toml_table(_section(data, "planner", where), source=f"{path} [planner]", **overrides)
 
-    est = dict(data.get("estimator", {}))
+    est = dict(_section(data, "estimator", where))
     drone_t, tracker_t = est.pop("drone", {}), est.pop("tracker", {})
-    _check_keys(est, set(), f"{path} [estimator]")
+    check.check_keys(f"{path} [estimator]", est, {"drone", "tracker"})
     try:
-        drone_filter = DroneFilterConfig.from_mapping(drone_t, where=f"{path} [estimator.drone]")
-        tracker = TrackerConfig.from_mapping(tracker_t, where=f"{path} [estimator.tracker]")
+        drone_filter = DroneFilterConfig.from_mapping(check.table(f"{path} [estimator.drone]", drone_t),
+                                                      where=f"{path} [estimator.drone]")
+        tracker = TrackerConfig.from_mapping(check.table(f"{path} [estimator.tracker]", tracker_t),
+                                             where=f"{path} [estimator.tracker]")
     except EstimatorConfigError as exc:
         raise ConfigError(str(exc)) from None
 
-    loop_t = data.get("companion", {})
-    _check_keys(loop_t, {f.name for f in fields(LoopConfig)}, f"{path} [companion]")
-    try:
-        loop = LoopConfig(**loop_t)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{path} [companion]: {exc}") from None
-
-    map_t = dict(data.get("map", {}))
-    walls_t, statics_t = map_t.pop("walls", []), map_t.pop("static_obstacles", [])
-    _check_keys(map_t, set(), f"{path} [map]")
-    walls = []
-    for i, w in enumerate(walls_t):
-        where = f"{path} [[map.walls]] #{i + 1}"
-        _check_keys(w, {"normal_ned", "offset_m"}, where)
-        normal = _vec3(w.get("normal_ned"), f"{where} normal_ned")
-        norm = float(np.linalg.norm(normal))
-        if norm == 0.0:
-            raise ConfigError(f"{where} normal_ned must not be zero")
-        walls.append(Wall(normal / norm, _number(w.get("offset_m"), f"{where} offset_m") / norm))
-    statics = []
-    for i, s in enumerate(statics_t):
-        where = f"{path} [[map.static_obstacles]] #{i + 1}"
-        _check_keys(s, {"center_ned_m", "radius_m", "covariance_m2"}, where)
-        statics.append(
-            StaticObstacle(
-                center=_vec3(s.get("center_ned_m"), f"{where} center_ned_m"),
-                radius=_number(s.get("radius_m", 0.5), f"{where} radius_m", nonnegative=True),
-                covariance=_cov3(s.get("covariance_m2", np.eye(3).tolist()), f"{where} covariance_m2"),
-            )
-        )
+    loop = check.build_section(LoopConfig, _section(data, "companion", where), f"{path} [companion]")
+    offboard = check.build_section(OffboardConfig, _section(data, "offboard", where), f"{path} [offboard]")
+    walls, statics = _map(data, path)
     return CompanionScenario(
-        path=path,
-        name=str(sc.get("name", path.stem)),
-        description=str(sc.get("description", "")),
-        duration_s=_number(sc.get("duration_s", 60.0), f"{path} [scenario] duration_s", positive=True),
-        drone_radius_m=drone_radius,
-        mission=mission,
-        planner=planner,
-        drone_filter=drone_filter,
-        tracker=tracker,
-        loop=loop,
-        walls=tuple(walls),
-        static_obstacles=tuple(statics),
-        traffic=traffic_from_toml(data.get("traffic", {}), f"{path} [traffic]"),
+        path=path, name=name, description=description, duration_s=duration_s, drone_radius_m=drone_radius,
+        mission=mission, planner=planner, drone_filter=drone_filter, tracker=tracker, loop=loop,
+        offboard=offboard, walls=walls, static_obstacles=statics,
+        traffic=traffic_from_toml(_section(data, "traffic", where), f"{path} [traffic]"),
     )

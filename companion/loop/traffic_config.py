@@ -30,10 +30,10 @@ only explicitly (``autopilot_link_kinds = ["ADSB_VEHICLE", "ODOMETRY"]``); it is
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+from companion import validation as check
 from companion.errors import ConfigError
 from companion.mavlink.traffic import TRAFFIC_KINDS
 
@@ -98,83 +98,87 @@ class TrafficConfig:
         return SourcePolicy(kinds, self.position_std_m, self.vertical_std_m, self.velocity_std_mps)
 
 
-_KEYS = {"obstacle_links", "autopilot_link_kinds", "obstacle_link_kinds", "position_std_m", "vertical_std_m",
-         "velocity_std_mps", "clock_window_s", "clock_jump_s", "statustext_period_s", "source"}
-_SOURCE_KEYS = {"link", "system", "icao", "kinds", "position_std_m", "vertical_std_m", "velocity_std_mps", "radius_m"}
+_KEYS = frozenset({"obstacle_links", "autopilot_link_kinds", "obstacle_link_kinds", "position_std_m", "vertical_std_m",
+                   "velocity_std_mps", "clock_window_s", "clock_jump_s", "statustext_period_s", "source"})
+_SOURCE_KEYS = frozenset({"link", "system", "icao", "kinds", "position_std_m", "vertical_std_m", "velocity_std_mps",
+                          "radius_m"})
+#: Bounds on what a scenario file may ask for (every list read from the file is bounded).
+MAX_OBSTACLE_LINKS = 16
+MAX_SOURCES = 64
+_MAX_STD = 1e4          # m, m/s: a 1-sigma accuracy worse than 10 km is a typo
+_MAX_PERIOD_S = 3600.0
 
 
-def _positive(table: Mapping[str, Any], key: str, default: float, where: str) -> float:
-    value = table.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise ConfigError(f"{where} {key}: expected a finite number > 0, got {value!r}")
-    return float(value)
+def _std(key: str, value: Any) -> float:
+    return check.number(key, value, positive=True, hi=_MAX_STD)
 
 
-def _kinds(table: Mapping[str, Any], key: str, default: frozenset, where: str) -> frozenset:
-    value = table.get(key)
-    if value is None:
-        return default
-    if not isinstance(value, list) or not all(isinstance(k, str) for k in value):
-        raise ConfigError(f"{where} {key}: expected a list of message names, got {value!r}")
+def _kinds(key: str, value: Any) -> frozenset:
+    if not isinstance(value, list) or len(value) > len(TRAFFIC_KINDS) or not all(isinstance(k, str) for k in value):
+        raise ConfigError(f"{key} = {value!r} must be a list of message names")
     unknown = sorted(set(value) - set(TRAFFIC_KINDS))
     if unknown:
-        raise ConfigError(f"{where} {key}: unknown kind(s) {', '.join(unknown)} (known: {', '.join(TRAFFIC_KINDS)})")
+        raise ConfigError(f"{key} = {value!r}: unknown kind(s) {', '.join(unknown)} (known: {', '.join(TRAFFIC_KINDS)})")
     return frozenset(value)
 
 
-def _optional_int(table: Mapping[str, Any], key: str, lo: int, hi: int, where: str) -> int | None:
-    value = table.get(key)
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ConfigError(f"{where} {key}: expected an integer in {lo}..{hi}, got {value!r}")
-    return value
+def _links(key: str, value: Any) -> tuple[str, ...]:
+    if not isinstance(value, list) or len(value) > MAX_OBSTACLE_LINKS:
+        raise ConfigError(f"{key} = {value!r} must be a list of at most {MAX_OBSTACLE_LINKS} pymavlink connection strings")
+    out = tuple(check.text(key, url, max_len=200) for url in value)
+    if not all(out):
+        raise ConfigError(f"{key} = {value!r}: a connection string is empty")
+    return out
 
 
-def traffic_from_toml(table: Mapping[str, Any], where: str) -> TrafficConfig:
-    """Validate a ``[traffic]`` table; errors name ``where`` (file and section) and the key."""
-    if not isinstance(table, Mapping):
-        raise ConfigError(f"{where}: must be a table")
-    unknown = sorted(set(table) - _KEYS)
-    if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(_KEYS))})")
-    links = table.get("obstacle_links", [])
-    if not isinstance(links, list) or not all(isinstance(u, str) and u for u in links):
-        raise ConfigError(f"{where} obstacle_links: expected a list of pymavlink connection strings, got {links!r}")
-    base = TrafficConfig()
-    std = {k: _positive(table, k, getattr(base, k), where) for k in ("position_std_m", "vertical_std_m", "velocity_std_mps")}
-    raw_sources = table.get("source", [])
-    if not isinstance(raw_sources, list):
-        raise ConfigError(f"{where} source: expected an array of tables [[traffic.source]]")
-    rules = []
-    for i, src in enumerate(raw_sources):
-        w = f"{where} [[traffic.source]] #{i + 1}"
-        if not isinstance(src, Mapping):
-            raise ConfigError(f"{w}: must be a table")
-        bad = sorted(set(src) - _SOURCE_KEYS)
-        if bad:
-            raise ConfigError(f"{w}: unknown key(s) {', '.join(bad)} (allowed: {', '.join(sorted(_SOURCE_KEYS))})")
-        link = src.get("link", "*")
-        if not isinstance(link, str) or not (link in ("*", AUTOPILOT_LINK) or link.startswith(OBSTACLE_LINK_PREFIX)):
-            raise ConfigError(f"{w} link: expected \"autopilot\", \"obstacles\", \"obstaclesN\" or \"*\", got {link!r}")
-        default_kinds = _kinds(table, "autopilot_link_kinds" if link == AUTOPILOT_LINK else "obstacle_link_kinds",
-                               base.autopilot_link_kinds if link == AUTOPILOT_LINK else base.obstacle_link_kinds, where)
-        radius = src.get("radius_m")
-        policy = SourcePolicy(
-            kinds=_kinds(src, "kinds", default_kinds, w),
-            position_std_m=_positive(src, "position_std_m", std["position_std_m"], w),
-            vertical_std_m=_positive(src, "vertical_std_m", std["vertical_std_m"], w),
-            velocity_std_mps=_positive(src, "velocity_std_mps", std["velocity_std_mps"], w),
-            radius_m=None if radius is None else _positive(src, "radius_m", 1.0, w),
-        )
-        rules.append(SourceRule(link, _optional_int(src, "system", 1, 255, w), _optional_int(src, "icao", 0, 0xFFFFFF, w), policy))
-    return TrafficConfig(
-        obstacle_links=tuple(links),
-        autopilot_link_kinds=_kinds(table, "autopilot_link_kinds", base.autopilot_link_kinds, where),
-        obstacle_link_kinds=_kinds(table, "obstacle_link_kinds", base.obstacle_link_kinds, where),
-        clock_window_s=_positive(table, "clock_window_s", base.clock_window_s, where),
-        clock_jump_s=_positive(table, "clock_jump_s", base.clock_jump_s, where),
-        statustext_period_s=_positive(table, "statustext_period_s", base.statustext_period_s, where),
-        sources=tuple(rules),
-        **std,
+def _source(raw: Mapping[str, Any], base: TrafficConfig) -> SourceRule:
+    """One ``[[traffic.source]]`` table (errors name the key; the caller adds where)."""
+    link = raw.get("link", "*")
+    if not isinstance(link, str) or not (link in ("*", AUTOPILOT_LINK) or link.startswith(OBSTACLE_LINK_PREFIX)):
+        raise ConfigError(f"link = {link!r} must be \"autopilot\", \"obstacles\", \"obstaclesN\" or \"*\"")
+    default_kinds = base.autopilot_link_kinds if link == AUTOPILOT_LINK else base.obstacle_link_kinds
+    policy = SourcePolicy(
+        kinds=_kinds("kinds", raw["kinds"]) if "kinds" in raw else default_kinds,
+        position_std_m=_std("position_std_m", raw.get("position_std_m", base.position_std_m)),
+        vertical_std_m=_std("vertical_std_m", raw.get("vertical_std_m", base.vertical_std_m)),
+        velocity_std_mps=_std("velocity_std_mps", raw.get("velocity_std_mps", base.velocity_std_mps)),
+        radius_m=check.number("radius_m", raw["radius_m"], positive=True, hi=1000.0) if "radius_m" in raw else None,
     )
+    system = check.integer("system", raw["system"], lo=1, hi=255) if "system" in raw else None
+    icao = check.integer("icao", raw["icao"], lo=0, hi=0xFFFFFF) if "icao" in raw else None
+    return SourceRule(link, system, icao, policy)
+
+
+def traffic_from_toml(table: Any, where: str) -> TrafficConfig:
+    """Validate a ``[traffic]`` table with :mod:`companion.validation`'s checks.
+
+    Errors start with ``where`` (file and section, e.g. ``"x.toml [traffic]"``), then the
+    ``[[traffic.source]]`` entry if any, then ``key = value must be ...``.
+    """
+    table = check.table(where, table)
+    check.check_keys(where, table, _KEYS)
+    try:
+        values: dict[str, Any] = {}
+        if "obstacle_links" in table:
+            values["obstacle_links"] = _links("obstacle_links", table["obstacle_links"])
+        for key in ("autopilot_link_kinds", "obstacle_link_kinds"):
+            if key in table:
+                values[key] = _kinds(key, table[key])
+        for key in ("position_std_m", "vertical_std_m", "velocity_std_mps"):
+            if key in table:
+                values[key] = _std(key, table[key])
+        for key in ("clock_window_s", "clock_jump_s", "statustext_period_s"):
+            if key in table:
+                values[key] = check.number(key, table[key], positive=True, hi=_MAX_PERIOD_S)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+    base = TrafficConfig(**values)  # the section's own defaults are the sources' defaults
+    rules = []
+    for i, raw in enumerate(check.array_of_tables(f"{where} source", table.get("source", []), max_len=MAX_SOURCES)):
+        w = f"{where} [[traffic.source]] #{i + 1}"
+        check.check_keys(w, raw, _SOURCE_KEYS)
+        try:
+            rules.append(_source(raw, base))
+        except ConfigError as exc:
+            raise ConfigError(f"{w}: {exc}") from None
+    return TrafficConfig(**values, sources=tuple(rules))

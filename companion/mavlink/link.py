@@ -47,8 +47,10 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from companion.mavlink.signing import enable_signing
+
 from companion.errors import LinkError
-from companion.mavlink.tlog import LOCKSTEP_EPOCH_S, TlogWriter
+from companion.mavlink.tlog import TlogWriter
 
 logger = logging.getLogger(__name__)
 
@@ -56,7 +58,6 @@ DEFAULT_URL = "udpin:0.0.0.0:14540"
 DEFAULT_SOURCE_SYSTEM = 1
 MAV_COMP_ID_ONBOARD_COMPUTER = 191
 DEFAULT_SOURCE_COMPONENT = MAV_COMP_ID_ONBOARD_COMPUTER
-_SIGNING_EPOCH_S = 1_420_070_400.0  # 2015-01-01T00:00:00Z, MAVLink 2 signing time origin
 _MAX_READS_PER_POLL = 1000
 _READ_SIZE = 65536
 
@@ -90,6 +91,7 @@ class LinkStats:
     received: int = 0
     bad: int = 0
     own_echo: int = 0
+    signature_rejected: int = 0  # unsigned or badly signed packets dropped (signing on)
     bytes_in: int = 0
     bytes_out: int = 0
     unaddressed: int = 0  # packets not sent: the peer's address is not known yet
@@ -162,12 +164,7 @@ class Link(abc.ABC):
     def _setup_signing(self, key: bytes, link_id: int, accept_unsigned: bool) -> None:
         if len(key) != 32:
             raise LinkError(f"MAVLink 2 signing key must be 32 bytes, got {len(key)}")
-        signing = self._mav.signing
-        signing.secret_key = key
-        signing.sign_outgoing = True
-        signing.link_id = link_id & 0xFF
-        # 10 microsecond units since 2015-01-01, as MAVLink 2 signing defines the stamp.
-        signing.timestamp = max(1, int((self.clock() + self.tlog_offset_s - _SIGNING_EPOCH_S) * 1e5))
+        enable_signing(self._mav, key, link_id=link_id, now_s=self.clock() + self.tlog_offset_s)
         if accept_unsigned:
             signing.allow_unsigned_callback = lambda _mav, _msgid: True
 
@@ -231,6 +228,10 @@ class Link(abc.ABC):
         for msg in msgs:
             if msg.get_type() == "BAD_DATA":
                 self.stats.bad += 1
+                if "signature" in str(msg.reason):
+                    self.stats.signature_rejected += 1
+                    if self.stats.signature_rejected & (self.stats.signature_rejected - 1) == 0:  # 1, 2, 4, 8...
+                        logger.warning("rejected %d unsigned or badly signed packets", self.stats.signature_rejected)
                 logger.debug("dropped bad MAVLink data (%s): %s", msg.reason, bytes(msg.data)[:32].hex())
                 continue
             if (msg.get_srcSystem(), msg.get_srcComponent()) == self.key:
@@ -294,8 +295,8 @@ class MemoryLink(Link):
     clock : callable () -> float
         Simulated time in seconds, used to stamp sent packets in the tlog.
     tlog_offset_s : float
-        Defaults to :data:`companion.mavlink.tlog.LOCKSTEP_EPOCH_S`, so a lockstep tlog
-        has plausible, reproducible epoch stamps.
+        Added to simulated time in tlog stamps; the lockstep harness passes mavsim's
+        lockstep epoch, so a lockstep tlog has plausible, reproducible epoch stamps.
     **kwargs
         As :class:`Link`.
 
@@ -306,7 +307,7 @@ class MemoryLink(Link):
     >>> for pkt in link.take_outbound(): sim.write(pkt)          # doctest: +SKIP
     """
 
-    def __init__(self, *, clock: Callable[[], float], tlog_offset_s: float = LOCKSTEP_EPOCH_S, **kwargs) -> None:
+    def __init__(self, *, clock: Callable[[], float], tlog_offset_s: float = 0.0, **kwargs) -> None:
         super().__init__(clock=clock, tlog_offset_s=tlog_offset_s, **kwargs)
         self._inbox: list[tuple[float, bytes]] = []
         self._outbox: list[bytes] = []

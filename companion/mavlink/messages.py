@@ -171,6 +171,14 @@ class StatusText:
 
 
 @dataclass(frozen=True)
+class HomePosition:
+    """HOME_POSITION: the sender's home altitude, metres AMSL (the message's ``altitude`` is mm)."""
+
+    key: Key
+    altitude_amsl_m: float
+
+
+@dataclass(frozen=True)
 class Rejected:
     """An inbound message that was not trusted; ``reason`` says why."""
 
@@ -179,7 +187,7 @@ class Rejected:
     reason: str
 
 
-Decoded = Union[VehicleHeartbeat, PoseObservation, CommandAck, StatusText, Rejected]
+Decoded = Union[VehicleHeartbeat, PoseObservation, CommandAck, StatusText, HomePosition, Rejected]
 
 
 # --------------------------------------------------------------------------- decoding
@@ -239,6 +247,11 @@ def decode_statustext(msg: mavlink2.MAVLink_statustext_message) -> StatusText:
     """STATUSTEXT to :class:`StatusText` (one chunk; text stripped of NULs)."""
     text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode("ascii", "replace")
     return StatusText(key=source_key(msg), severity=int(msg.severity), text=text.rstrip("\x00"))
+
+
+def decode_home_position(msg: mavlink2.MAVLink_home_position_message) -> HomePosition:
+    """HOME_POSITION to :class:`HomePosition` (altitude mm AMSL to metres)."""
+    return HomePosition(key=source_key(msg), altitude_amsl_m=msg.altitude / 1000.0)
 
 
 def covariance_from_upper_triangle(values, *, what: str) -> np.ndarray | None | str:
@@ -371,6 +384,7 @@ _DECODERS = {
     "LOCAL_POSITION_NED": decode_local_position_ned,
     "COMMAND_ACK": decode_command_ack,
     "STATUSTEXT": decode_statustext,
+    "HOME_POSITION": decode_home_position,
 }
 
 

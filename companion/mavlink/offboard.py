@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink import messages, px4
-from companion.errors import ConfigError
+from companion import validation as check
 from companion.mavlink.messages import CommandAck, VehicleHeartbeat
 
 logger = logging.getLogger(__name__)
@@ -86,9 +86,13 @@ _STREAMING = frozenset({Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED, 
 _FINAL = frozenset({Phase.LINK_LOST, Phase.GAVE_UP, Phase.PILOT_TOOK_OVER, Phase.HELD})
 
 
+#: Upper bound of every offboard duration setting (s): a day is already absurd.
+MAX_OFFBOARD_SECONDS = 86_400.0
+
+
 @dataclass(frozen=True)
 class OffboardConfig:
-    """Settings of the offboard sequence.
+    """Settings of the offboard sequence (the scenario file's ``[offboard]`` table).
 
     Attributes
     ----------
@@ -130,20 +134,18 @@ class OffboardConfig:
     hold_after_goal_s: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("prestream_s", "retry_period_s", "takeoff_timeout_s", "heartbeat_timeout_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
-                raise ConfigError(f"offboard config: {name} must be finite seconds >= 0, got {value!r}")
-        if self.retry_period_s <= 0.0 or self.heartbeat_timeout_s <= 0.0:
-            raise ConfigError("offboard config: retry_period_s and heartbeat_timeout_s must be > 0")
-        if not (isinstance(self.max_retries, int) and self.max_retries >= 0):
-            raise ConfigError(f"offboard config: max_retries must be an integer >= 0, got {self.max_retries!r}")
-        if self.hold_after_goal_s is not None and not (math.isfinite(self.hold_after_goal_s)
-                                                        and self.hold_after_goal_s >= 0.0):
-            raise ConfigError(f"offboard config: hold_after_goal_s must be finite seconds >= 0, got "
-                              f"{self.hold_after_goal_s!r}")
-        if self.takeoff_alt_m is not None and not (math.isfinite(self.takeoff_alt_m) and self.takeoff_alt_m > 0):
-            raise ConfigError(f"offboard config: takeoff_alt_m must be > 0 metres, got {self.takeoff_alt_m!r}")
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
+        for name in ("prestream_s", "takeoff_timeout_s"):
+            set_(name, check.number(name, getattr(self, name), lo=0.0, hi=MAX_OFFBOARD_SECONDS))
+        for name in ("retry_period_s", "heartbeat_timeout_s"):
+            set_(name, check.number(name, getattr(self, name), positive=True, hi=MAX_OFFBOARD_SECONDS))
+        check.integer("max_retries", self.max_retries, lo=0, hi=1000)
+        check.boolean("arm", self.arm)
+        check.boolean("reengage", self.reengage)
+        if self.takeoff_alt_m is not None:
+            set_("takeoff_alt_m", check.number("takeoff_alt_m", self.takeoff_alt_m, positive=True, hi=10_000.0))
+        if self.hold_after_goal_s is not None:
+            set_("hold_after_goal_s", check.number("hold_after_goal_s", self.hold_after_goal_s, lo=0.0, hi=MAX_OFFBOARD_SECONDS))
 
 
 @dataclass(frozen=True)

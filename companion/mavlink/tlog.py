@@ -6,9 +6,11 @@ on the wire (MAVLink 1 or 2, signed or not). MAVProxy stores the link number in
 the low 2 bits of the stamp; readers ignore it (0.3 microseconds at most).
 
 Writing is plain file I/O (no clock: the caller passes the time of each record).
-In lockstep runs the harness passes :data:`LOCKSTEP_EPOCH_S` plus simulated
-time, so the same seed writes a byte-identical log. Reading goes through
-pymavlink itself, so whatever ``mavutil`` reads, :func:`read_tlog` reads.
+In lockstep runs the harness passes mavsim's lockstep epoch
+(:data:`companion.offline.harness.LOCKSTEP_EPOCH_S`) plus simulated time, so the
+same seed writes a byte-identical log. Reading is record by record (bounded: one
+record at a time, at most :data:`MAX_PACKET_BYTES` after its stamp) and decodes
+with pymavlink's parser; a damaged record stops the read naming its byte offset.
 """
 
 from __future__ import annotations
@@ -21,17 +23,19 @@ from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
 
+from pymavlink.dialects.v20 import common as mavlink2
+
 from companion.errors import CompanionError
 
 logger = logging.getLogger(__name__)
 
-#: Fixed epoch (2024-01-01T00:00:00Z, seconds since the Unix epoch) added to
-#: simulated time when a lockstep run records a tlog, for reproducible logs.
-LOCKSTEP_EPOCH_S = 1_704_067_200.0
-
 _STAMP = struct.Struct(">Q")
 _MAGICS = (0xFE, 0xFD)
 _MIN_PACKET = 8  # MAVLink 1 header (6) + CRC (2), empty payload
+#: Largest MAVLink packet (MAVLink 2: 10-byte header, 255-byte payload, CRC, 13-byte signature).
+MAX_PACKET_BYTES = 10 + 255 + 2 + 13
+_LAST_PLAUSIBLE_US = 4_102_444_800 * 1_000_000  # 2100-01-01: a later stamp is damage
+_MAX_STAMP_JUMP_US = 86_400 * 1_000_000         # one day between consecutive records
 
 
 class TlogError(CompanionError, ValueError):
@@ -126,15 +130,28 @@ def _check_tlog(path: Path) -> None:
         )
 
 
+def _packet_length(head: bytes) -> int:
+    """Length of the MAVLink packet whose first three bytes are ``head`` (magic, payload length, flags)."""
+    if head[0] == 0xFE:
+        return 6 + head[1] + 2
+    signed = bool(head[2] & mavlink2.MAVLINK_IFLAG_SIGNED)
+    return 10 + head[1] + 2 + (mavlink2.MAVLINK_SIGNATURE_BLOCK_LEN if signed else 0)
+
+
 def read_tlog(path: str | os.PathLike, *, include_bad: bool = False) -> Iterator[tuple[float, object]]:
-    """Iterate over ``(t_s, msg)`` of a tlog, read with pymavlink's own tlog reader (``mavutil.mavlogfile``).
+    """Iterate over ``(t_s, msg)`` of a tlog, record by record, with bounded memory.
+
+    Each record is read exactly: the 8-byte stamp, then the packet whose length its own
+    header gives (at most :data:`MAX_PACKET_BYTES`), decoded by pymavlink. Nothing larger
+    than one record is ever held, however the file is damaged. Stamps are converted as
+    pymavlink's ``mavlogfile`` does (``t = stamp_us * 1e-6``), so replays see the same times.
 
     Parameters
     ----------
     path : str or Path
         The tlog.
     include_bad : bool
-        Also yield pymavlink's ``BAD_DATA`` pseudo messages (corrupt bytes).
+        Also yield pymavlink's ``BAD_DATA`` pseudo messages (records whose CRC fails).
 
     Yields
     ------
@@ -147,42 +164,65 @@ def read_tlog(path: str | os.PathLike, *, include_bad: bool = False) -> Iterator
     Raises
     ------
     TlogError
-        Missing file, empty file, a file that is not a tlog, or a log holding
-        no valid MAVLink message. A truncated final record is tolerated
+        Missing file, empty file, a file that is not a tlog, a log holding no valid
+        MAVLink message, or a damaged record: a stamp after 2100 or more than a day from
+        the previous record's, or a record that does not start with a MAVLink magic byte
+        (the message names the byte offset). A truncated final record is tolerated
         (logged, skipped).
     """
-    from pymavlink import mavutil
-
     path = Path(path)
     _check_tlog(path)
     try:
-        # mavutil.mavlink_connection(path) would pick mavmmaplog, whose index
-        # building crashes on a truncated final record (pymavlink 2.4.x); its
-        # base class mavlogfile reads the same records sequentially and copes.
-        conn = mavutil.mavlogfile(str(path), robust_parsing=True)
-    except (OSError, ValueError) as exc:
-        raise TlogError(f"cannot open tlog {path}: {exc}") from exc
-    good = 0
-    bad = 0
+        f = open(path, "rb")  # noqa: SIM115 (closed in finally)
+    except OSError as exc:
+        raise TlogError(f"cannot open tlog {path}: {exc.strerror or exc}") from exc
+    parser = mavlink2.MAVLink(None)
+    parser.robust_parsing = True
+    good = bad = 0
+    last_us: int | None = None
     try:
         while True:
+            offset = f.tell()
+            stamp = f.read(_STAMP.size)
+            if len(stamp) < _STAMP.size:
+                if stamp:
+                    logger.warning("tlog %s: truncated record at byte offset %d skipped", path, offset)
+                break
+            (t_us,) = _STAMP.unpack(stamp)
+            if t_us > _LAST_PLAUSIBLE_US or (last_us is not None and abs(t_us - last_us) > _MAX_STAMP_JUMP_US):
+                raise TlogError(f"tlog {path}: nonsense timestamp 0x{t_us:016x} at byte offset {offset} "
+                                f"(the log is damaged from here)")
+            head = f.read(3)
+            if len(head) < 3:
+                logger.warning("tlog %s: truncated record at byte offset %d skipped", path, offset)
+                break
+            if head[0] not in _MAGICS:
+                raise TlogError(f"tlog {path}: no MAVLink packet at byte offset {offset + _STAMP.size} "
+                                f"(found 0x{head[0]:02x}; the log is damaged from here)")
+            rest = _packet_length(head) - 3
+            body = f.read(rest)
+            if len(body) < rest:
+                logger.warning("tlog %s: truncated record at byte offset %d skipped", path, offset)
+                break
+            parser.buf, parser.buf_index, parser.expected_length = bytearray(), 0, mavlink2.HEADER_LEN_V1 + 2
             try:
-                msg = conn.recv_msg()
-            except (struct.error, IndexError, ValueError) as exc:  # defensive: truncated tail
-                logger.warning("tlog %s: stopped at a damaged record: %s", path, exc)
-                break
-            if msg is None:
-                break
+                msgs = parser.parse_buffer(head + body) or []
+            except Exception as exc:  # robust parsing should not raise; a record is never worth a crash
+                logger.debug("tlog %s: record at byte offset %d undecodable: %s", path, offset, exc)
+                msgs = []
+            msg = msgs[0] if msgs else mavlink2.MAVLink_bad_data(bytearray(head + body), "undecodable record")
+            msg._timestamp = t_us * 1.0e-6
             if msg.get_type() == "BAD_DATA":
                 bad += 1
                 if include_bad:
-                    yield float(msg._timestamp), msg
+                    yield msg._timestamp, msg
                 continue
+            last_us = t_us
             good += 1
-            yield float(msg._timestamp), msg
+            yield msg._timestamp, msg
     finally:
-        conn.close()
+        f.close()
     if bad:
-        logger.info("tlog %s: %d valid messages, %d corrupt or truncated records skipped", path, good, bad)
+        logger.info("tlog %s: %d valid messages, %d corrupt records skipped", path, good, bad)
     if good == 0:
         raise TlogError(f"tlog {path} holds no valid MAVLink message")

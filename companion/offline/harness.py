@@ -26,11 +26,15 @@ from companion.offline.slack import companion_slack_report
 from companion.loop.config import CompanionScenario, load_scenario, scenario_from_dict
 from mavsim.lockstep import LockstepSimulator
 from mavsim.scenario import scenario_from_dict as sim_scenario_from_dict
+from mavsim.tlog import LOCKSTEP_EPOCH_US
 
 logger = logging.getLogger(__name__)
 
 #: ``drop(t_s, direction, packet) -> bool``; direction is ``"to_companion"`` or ``"to_vehicle"``.
 PacketFilter = Callable[[float, str, bytes], bool]
+
+#: mavsim's lockstep epoch (2024-01-01T00:00:00Z) in seconds: the stamp of simulated time 0 in lockstep tlogs.
+LOCKSTEP_EPOCH_S = LOCKSTEP_EPOCH_US / 1_000_000
 
 
 @dataclass
@@ -96,10 +100,11 @@ def run_lockstep(
         config, sim_scenario = _parse(scenario, planner_overrides)
         sim = LockstepSimulator(sim_scenario, seed=seed, tlog=sim_tlog_path)
     companion = Companion(config, offboard=offboard)
-    link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path)
+    link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path, tlog_offset_s=LOCKSTEP_EPOCH_S)
     # Obstacles with transport = "link" arrive on their own receive-only link, as on a vehicle.
     # Recorded in the same tlog (replay routes other systems' traffic back to an obstacle link).
-    obstacle_link = (MemoryLink(clock=lambda: sim.time_s, name="obstacles1", receive_only=True, tlog=link.tlog)
+    obstacle_link = (MemoryLink(clock=lambda: sim.time_s, name="obstacles1", receive_only=True, tlog=link.tlog,
+                                tlog_offset_s=LOCKSTEP_EPOCH_S)
                      if sim.has_obstacle_link else None)
     rng = np.random.default_rng([seed, 0xC0FFEE])
     dt = 1.0 / config.loop.setpoint_rate_hz

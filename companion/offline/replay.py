@@ -1,5 +1,8 @@
 """Replay a MAVLink tlog through the companion's estimator and planner, in log time.
 
+(About 450 lines: one job, rebuilding the recorded ticks and comparing the commands;
+the stand-ins for the live edge are in :mod:`companion.offline.replay_stand_ins`.)
+
 :func:`replay` reads a tlog (:func:`companion.mavlink.tlog.read_tlog`), feeds every *inbound*
 message (from any source other than the companion's own (system, component), by
 default (1, 191): the autopilot, obstacle systems, a ground station) to a fresh
@@ -15,9 +18,10 @@ records with no inbound record between them, ended by its SET_POSITION_TARGET_LO
 (the last message of a streaming tick), and its time is the stamp of its first record.
 Ticks that sent nothing (the companion ticks at ``setpoint_rate_hz`` from its first tick
 on, and a tick that is not streaming and not due a HEARTBEAT sends nothing) are put back
-on the setpoint-rate grid between recorded ticks (never after a tick that sent a setpoint:
-a streaming companion sends one every tick) and after the last one up to the end of
-the log, each after the inbound records stamped up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
+on the setpoint-rate grid between recorded ticks (never between two ticks that both sent a
+setpoint: a streaming companion sends one every tick, so a wider gap there is a tick that
+ran late in real time) and after the last one up to the end of the log, each after the
+inbound records stamped up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
 
 *What-if* (no companion packets: mavsim's own ``--tlog``, a MAVProxy or QGroundControl
 log). The companion ticks at its setpoint rate over the log's duration, and since no
@@ -31,7 +35,7 @@ Time base
 ---------
 The companion runs on *link time*: Unix time on a real link, simulated time in lockstep.
 A lockstep tlog is stamped ``LOCKSTEP_EPOCH_S + simulated time``
-(:data:`companion.mavlink.tlog.LOCKSTEP_EPOCH_S`, see :class:`~companion.mavlink.link.MemoryLink`), so
+(:data:`companion.offline.harness.LOCKSTEP_EPOCH_S`, see :class:`~companion.mavlink.link.MemoryLink`), so
 the replay subtracts that offset. ``time_offset_s=None`` detects it: a log whose first
 stamp lies within one day after ``LOCKSTEP_EPOCH_S`` (2024-01-01) is a lockstep log;
 otherwise the offset is 0 (pass ``time_offset_s`` to override). Times are handled in
@@ -40,6 +44,13 @@ expression ``mavsim`` uses for its clock, so a lockstep log replays with bit-ide
 times and therefore bit-identical commands. For a real-time log the recorded stamps are
 the link's clock when each packet was sent (a few microseconds after the tick's own
 clock reading), so its replay agrees only to that timing.
+
+Plans in real time. ``companion fly`` plans in a process beside the stream, so a plan
+is applied some ticks after its request; the tick it arrived at carries a
+NAMED_VALUE_FLOAT ``plan_seq`` (:data:`companion.loop.app.PLAN_ARRIVED`). A log with such
+announcements is replayed with :class:`~companion.offline.replay_stand_ins.RecordedArrivals`:
+each plan is solved when its arrival comes and applied at that tick, so a real-time log
+reproduces its commands exactly. Lockstep logs have none: plans apply at their request's tick.
 
 Comparison. SET_POSITION_TARGET_LOCAL_NED carries float32 velocities, so the replayed
 velocities are rounded to float32 exactly as packing would before they are compared:
@@ -59,12 +70,16 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink import messages
+from companion.core.planner import Planner
 from companion.loop.app import Companion
+from companion.offline.replay_stand_ins import AssumeEngaged, RecordedArrivals, arrivals
+from companion.loop.records import status_counts
 from companion.errors import CompanionError
 from companion.mavlink.link import DEFAULT_SOURCE_COMPONENT, DEFAULT_SOURCE_SYSTEM, Received
-from companion.mavlink.offboard import OffboardConfig, Phase, SequencerState
+from companion.mavlink.offboard import OffboardConfig
 from companion.loop.config import load_scenario
-from companion.mavlink.tlog import LOCKSTEP_EPOCH_S, read_tlog
+from companion.mavlink.tlog import read_tlog
+from companion.offline.harness import LOCKSTEP_EPOCH_S
 from companion.loop.obstacles import replay_link
 
 logger = logging.getLogger(__name__)
@@ -172,57 +187,6 @@ class ReplayResult:
             "events": [(round(t, 3), text) for t, text in state.events],
             "notes": list(self.notes),
         }
-
-
-# --------------------------------------------------------------------------- what-if stand-in
-
-
-class AssumeEngaged:
-    """Stand-in for :class:`~companion.mavlink.offboard.OffboardSequencer` in a what-if replay.
-
-    Streams and counts as engaged from the first PX4 autopilot HEARTBEAT on; sends no
-    commands. Used only for logs in which no companion ever asked for OFFBOARD.
-    """
-
-    def __init__(self) -> None:
-        self._target: tuple[int, int] | None = None
-        self._since: float | None = None
-        self.events: list = []
-
-    def on_heartbeat(self, t_s: float, hb: messages.VehicleHeartbeat) -> None:
-        if hb.is_autopilot and self._target is None:
-            self._target, self._since = hb.key, t_s
-
-    def on_ack(self, t_s: float, ack: messages.CommandAck) -> None:
-        """Ignored: nothing was asked."""
-
-    def on_statustext(self, t_s: float, text: str) -> None:
-        """Ignored."""
-
-    def on_home_altitude(self, alt_amsl_m: float) -> None:
-        """Ignored."""
-
-    def on_goal_reached(self, t_s: float) -> None:
-        """Ignored."""
-
-    def step(self, t_s: float) -> list:
-        return []
-
-    @property
-    def target(self) -> tuple[int, int] | None:
-        return self._target
-
-    @property
-    def phase(self) -> Phase:
-        return Phase.ENGAGED if self._target is not None else Phase.WAIT_AUTOPILOT
-
-    @property
-    def state(self) -> SequencerState:
-        engaged = self._target is not None
-        return SequencerState(
-            phase=self.phase, streaming=engaged, engaged=engaged, since_s=self._since, attempts=0,
-            reason="replay what-if: assumed engaged from the first autopilot HEARTBEAT",
-        )
 
 
 # --------------------------------------------------------------------------- log reading
@@ -363,9 +327,13 @@ def replay(
     if mode == "compare" and not lockstep:
         notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
 
-    companion = Companion(scenario, offboard=offboard)
+    realtime_plans = any(arrivals(ev.recorded) for ev in events if isinstance(ev, _Tick))
+    schedule = RecordedArrivals(Planner(scenario.planner)) if realtime_plans else None
+    if realtime_plans:
+        notes.append("plans applied at the ticks the recording announced their arrival (real-time planning)")
+    companion = Companion(scenario, offboard=offboard, sequencer=AssumeEngaged() if assume_engaged else None,
+                          planning=schedule)
     if assume_engaged:
-        companion.sequencer = AssumeEngaged()
         notes.append("offboard sequence assumed engaged from the first autopilot HEARTBEAT (what-if)")
 
     times, cmds, recs = [], [], []
@@ -376,6 +344,8 @@ def replay(
             companion.handle(Received(ev.t_us * 1e-6, ev.msg, ev.raw, replay_link(ev.msg, companion.autopilot)))
             continue
         t = ev.t_us * 1e-6
+        if schedule is not None:
+            schedule.arrivals = arrivals(ev.recorded)
         out = companion.tick(t)
         ticks += 1
         sp = next((m for m in reversed(out) if m.get_type() == _SETPOINT), None)
@@ -405,9 +375,9 @@ def replay(
         max_diff, max_t = diffs[i_max]
     else:
         i_max, max_diff, max_t = None, None, None
-    statuses: dict[str, int] = {}
-    for r in companion.records:
-        statuses[r.status] = statuses.get(r.status, 0) + 1
+    if schedule is not None and schedule.missing:
+        notes.append(f"{schedule.missing} announced plan arrivals had no matching replan request (the log and the scenario disagree)")
+    statuses = status_counts(r.status for r in companion.records)
     result = ReplayResult(
         path=path,
         scenario_path=Path(scenario_path),
@@ -470,10 +440,10 @@ def _schedule(stream: list[tuple[bool, _Rec]], period_us: int) -> list:
     gaps = {}
     for a, b in zip(ticks, ticks[1:]):
         silent, t = deque(), a.t_us + period_us
-        # a tick that sent a setpoint was streaming, and a streaming companion sends one every
-        # tick until a tick that stops it: no silent tick follows it. (A real-time loop late
-        # under load leaves gaps of more than a period; on the grid they would be extra ticks.)
-        while a.setpoint is None and t < b.t_us - period_us // 2:
+        # Between two streaming ticks there is none that sent nothing (a streaming tick always
+        # sends its setpoint): a wider gap there is a late tick in real time, not a silent one.
+        streaming = a.setpoint is not None and b.setpoint is not None
+        while not streaming and t < b.t_us - period_us // 2:
             silent.append(t)
             t += period_us
         gaps[id(a)] = silent

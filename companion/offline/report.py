@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from companion.loop.app import Companion
+from companion.loop.records import status_counts
 
 _FAILSAFE_WORDS = ("braking", "stale", "PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP", "slack used")
 
@@ -22,9 +23,7 @@ def companion_report(companion: Companion) -> dict:
     solve = np.array([r.solve_time_s for r in records]) if records else np.zeros(0)
     realised = [min(r.realised_contour.values()) for r in records if r.realised_contour]
     planned = [r.planned_min_contour for r in records if math.isfinite(r.planned_min_contour)]
-    statuses: dict[str, int] = {}
-    for r in records:
-        statuses[r.status] = statuses.get(r.status, 0) + 1
+    statuses = status_counts(r.status for r in records)
     state = companion.state
     return {
         "formulation": companion.cfg.formulation,
@@ -42,6 +41,8 @@ def companion_report(companion: Companion) -> dict:
         "solve_time_median_ms": float(np.median(solve) * 1e3) if solve.size else None,
         "solve_time_p99_ms": float(np.percentile(solve, 99) * 1e3) if solve.size else None,
         "stale_events": state.stale_events,
+        "old_plan_events": state.old_plan_events,
+        "tracks_unconstrained_max": state.tracks_unconstrained_max,
         "messages_rejected": state.messages_rejected,
         "obstacle_reports_rejected": state.obstacle_rejections + companion.obstacles.summary()["rejected_total"],
         "tracks": len(companion.tracker),
@@ -104,6 +105,10 @@ def format_report(report: dict) -> str:
         ("replans_with_slack", "replans that used safety slack"),
         ("failed_plans", "failed plans"),
         ("stale_events", "stale-estimate events"),
+        ("old_plan_events", "plan-too-old brakes"),
+        ("tracks_unconstrained_max", "most tracks left unconstrained in a replan"),
+        ("setpoint_rate_hz", "setpoint rate [Hz]"),
+        ("setpoint_gap_max_ms", "largest setpoint gap [ms]"),
         ("final_mode", "final mode"),
     ]
     width = max(len(label) for _, label in order)

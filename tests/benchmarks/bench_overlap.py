@@ -72,7 +72,7 @@ def run() -> list[dict]:
             "name": "minmax batched, 10k 3-D pairs",
             "value": batched_ms,
             "unit": "ms",
-            "target": "<= 10",
+            "target": "<= 3",
             "note": f"median of {REPEATS} calls; condition numbers 1..1e4",
         },
         {

@@ -42,6 +42,28 @@ def test_that_plan_plot_writes_a_png(tmp_path, capsys):
 
 def test_that_a_bad_scenario_is_a_clear_error(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
-    bad.write_text('[planner]\nc_min = 1.5\n[mission]\ngoal_ned_m = [1.0, 0.0, -5.0]\n')
+    bad.write_text('[planner]\nc_min = 1.5\n[mission]\ngoal_ned_m = [1.0, 0.0, -5.0]\ngoal_tolerance_m = 0.3\n')
     assert main(["plan", str(bad)]) == 2
     assert "c_min = 1.5" in capsys.readouterr().err
+
+
+def test_that_plan_moves_scripted_obstacles_by_mavsims_model_with_delay_and_loop(tmp_path):
+    from companion.commands.plan import build_request
+
+    path = tmp_path / "delayed.toml"
+    path.write_text(
+        "[vehicle]\nstart_ned_m = [0.0, 0.0, -5.0]\n"
+        "[mission]\ngoal_ned_m = [10.0, 0.0, -5.0]\ngoal_tolerance_m = 0.3\n"
+        "[planner]\nhorizon_steps = 20\nstep_s = 0.5\n"
+        "[[world.obstacles]]\nname = 'late'\nstart_ned_m = [5.0, 5.0, -5.0]\nvelocity_ned_mps = [1.0, 0.0, 0.0]\n"
+        "start_delay_s = 4.0\n"
+        "[[world.obstacles]]\nname = 'shuttle'\nstart_ned_m = [0.0, 8.0, -5.0]\nwaypoints_ned_m = [[2.0, 8.0, -5.0]]\n"
+        "speed_mps = 1.0\nloop = true\n"
+    )
+    _, req, info = build_request(path)
+    assert info["names"] == ["late", "shuttle"]
+    t = 0.5 * np.arange(1, 21)
+    late, shuttle = req.obstacle_means
+    np.testing.assert_allclose(late[:, 0], 5.0 + np.maximum(0.0, t - 4.0))      # still until 4 s, then 1 m/s
+    s = np.mod(t, 4.0)                                                          # 2 m out, 2 m back, again
+    np.testing.assert_allclose(shuttle[:, 0], np.where(s <= 2.0, s, 4.0 - s), atol=1e-12)

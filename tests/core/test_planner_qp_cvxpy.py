@@ -16,7 +16,7 @@ import pytest
 from companion.core import overlap
 from companion.core.planner import Planner, PlannerConfig, PlanRequest
 from companion.core.planner.formulations import BACKOFF_SIGMA, LAM_EPS
-from companion.core.planner.scp import LEAST_VIOLATION_MARGIN
+from companion.core.planner.qp_step import LEAST_VIOLATION_MARGIN
 
 N = 12
 TAU = 0.5
@@ -133,7 +133,7 @@ def _paper_lam(req: PlanRequest, v_bar: np.ndarray) -> np.ndarray:
 
 def _safety_slack_total(planner: Planner, step) -> float:
     """Total safety slack of a QP step (in-range obstacle rows, walls, admissibility)."""
-    layout = planner._qps[(N, 3, 1)][0]
+    layout = planner.layout((N, 3, 1))
     total = step.slack_obstacle[:2].sum() + step.slack_wall.sum()
     if layout.paper:
         total += np.abs(step.solution.x[layout.col["e_pos"].slice]).sum()

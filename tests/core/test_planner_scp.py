@@ -6,6 +6,8 @@ Safety figures are recomputed here with the overlap module on the returned posit
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -87,18 +89,50 @@ def test_that_without_obstacles_the_plan_goes_straight_to_the_goal_within_bounds
     assert plan.eta.shape == (0, 20) and plan.wall_margin.shape == (0, 20)
 
 
+def _unavoidable_request(n: int = 20) -> PlanRequest:
+    """An obstacle 0.3 m ahead of the drone that follows it: no plan keeps the contours apart."""
+    means = np.broadcast_to(START + np.array([0.3, 0.0, 0.0]), (1, n, 3))
+    return PlanRequest(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (n, 3, 3)), target=GOAL,
+                       obstacle_means=means, obstacle_covs=np.broadcast_to(S, (1, n, 3, 3)), obstacle_radii=[0.5])
+
+
 def test_that_an_unavoidable_obstacle_is_never_reported_optimal():
     # an obstacle sits on the drone and follows it: no plan keeps 60 % contours apart
     cfg, _ = scenario_one()
-    n = 20
-    means = np.broadcast_to(START + np.array([0.3, 0.0, 0.0]), (1, n, 3))
-    req = PlanRequest(position=START, velocity=np.zeros(3), drone_covs=np.broadcast_to(S, (n, 3, 3)), target=GOAL,
-                      obstacle_means=means, obstacle_covs=np.broadcast_to(S, (1, n, 3, 3)), obstacle_radii=[0.5])
-    plan = Planner(cfg).solve(req)
+    req = _unavoidable_request()
+    plan = Planner(dataclasses.replace(cfg, replan_work_budget=10**6)).solve(req)   # budget not binding
     assert plan.status in ("slack", "failed")
     assert plan.status == "slack" and plan.slack_max > 0.1
     assert plan.contour_of_touch[0, 0] < 0.6
     assert np.all(np.isfinite(plan.velocities))
+    assert plan.work > 8000                        # this least-violation path needs more than 8000 units
+
+
+def test_that_a_replan_out_of_budget_fails_without_a_safe_iterate_and_flies_a_completed_least_violation():
+    cfg, _ = scenario_one()
+    req = _unavoidable_request()
+    for budget in (200, 1000):                          # not even the hard QP completes
+        plan = Planner(dataclasses.replace(cfg, replan_work_budget=budget)).solve(req)
+        assert plan.work <= budget
+        assert plan.status == "failed"                  # no safe iterate exists here: the loop brakes
+        assert any(n.startswith("work_budget") for n in plan.notes)
+    plan = Planner(dataclasses.replace(cfg, replan_work_budget=8000)).solve(req)   # one least-violation iteration fits
+    assert plan.work <= 8000
+    assert any(n.startswith("work_budget") for n in plan.notes)
+    assert plan.status == "slack" and plan.slack_max > 0.1
+
+
+def test_that_a_tight_budget_still_returns_a_safe_plan_when_the_start_is_safe():
+    cfg, req = scenario_one()
+    planner = Planner(cfg)
+    first = planner.solve(req)
+    assert first.status == "optimal" and first.work <= cfg.replan_work_budget and first.admm_iterations > 0
+    tight = Planner(dataclasses.replace(cfg, replan_work_budget=200))
+    tight.solve(req)
+    again = tight.solve(req, warm_start=first)          # 200 units: not even one QP fits
+    assert again.work <= 200
+    assert again.status == "optimal"                    # the shifted previous plan, rechecked exactly
+    assert np.all(again.contour_of_touch[again.in_range] >= cfg.c_min - 1e-3)
 
 
 def test_that_obstacles_beyond_sensing_range_are_ignored():
@@ -114,9 +148,9 @@ def test_that_a_warm_started_replan_reuses_the_solver_and_agrees():
     cfg, req = scenario_one()
     planner = Planner(cfg)
     first = planner.solve(req)
-    qp = planner._qps[(20, 1, 0)][1]
+    qp = planner.solver((20, 1, 0))
     again = planner.solve(req, warm_start=first)
-    assert planner._qps[(20, 1, 0)][1] is qp              # set up once per shape, updated in place
+    assert qp is not None and planner.solver((20, 1, 0)) is qp   # set up once per shape, updated in place
     assert again.status == "optimal"
     assert np.linalg.norm(again.positions[-1] - GOAL) <= 0.1
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -94,7 +96,7 @@ def test_that_an_infeasible_c_max_is_reported_in_the_notes():
 
 def test_that_c_max_is_released_for_obstacles_outside_the_upper_bound_mask():
     req, bound, cfg = _escort(0.6, "hyperplane")
-    free = Planner(cfg).solve(PlanRequest(**{**req.__dict__, "upper_bound_mask": np.array([False])}))
+    free = Planner(cfg).solve(dataclasses.replace(req, upper_bound_mask=np.array([False])))
     assert free.status == "optimal"
     assert free.contour_of_touch.max() > 0.9     # as without c_max: the obstacle is let go
     assert bound.contour_of_touch.max() <= 0.6 + 2e-3
@@ -103,4 +105,4 @@ def test_that_c_max_is_released_for_obstacles_outside_the_upper_bound_mask():
 def test_that_a_malformed_upper_bound_mask_is_refused():
     req, _, _ = _escort(0.6, "hyperplane")
     with pytest.raises(ValueError, match="upper_bound_mask"):
-        PlanRequest(**{**req.__dict__, "upper_bound_mask": np.array([1, 0])})
+        dataclasses.replace(req, upper_bound_mask=np.array([1, 0]))

@@ -116,11 +116,17 @@ def test_that_a_report_before_the_vehicle_clock_is_known_is_counted():
 
 
 def test_that_bad_traffic_settings_name_the_file_and_key():
-    with pytest.raises(ConfigError, match=r"f\.toml \[traffic\] position_std_m"):
+    with pytest.raises(ConfigError, match=r"f\.toml \[traffic\]: position_std_m = -1\.0 must be positive"):
         traffic_from_toml({"position_std_m": -1.0}, "f.toml [traffic]")
     with pytest.raises(ConfigError, match="unknown kind"):
         traffic_from_toml({"autopilot_link_kinds": ["HEARTBEAT"]}, "f.toml [traffic]")
-    with pytest.raises(ConfigError, match=r"#1 link"):
+    with pytest.raises(ConfigError, match=r"f\.toml \[traffic\] \[\[traffic\.source\]\] #1: link = 'gcs'"):
         traffic_from_toml({"source": [{"link": "gcs"}]}, "f.toml [traffic]")
-    with pytest.raises(ConfigError, match="unknown key"):
+    with pytest.raises(ConfigError, match=r"f\.toml \[traffic\]: unknown key\(s\) radius"):
         traffic_from_toml({"radius": 1.0}, "f.toml [traffic]")
+    with pytest.raises(ConfigError, match=r"#2: system = 0 must be >= 1"):
+        traffic_from_toml({"source": [{"link": "*"}, {"system": 0}]}, "f.toml [traffic]")
+    with pytest.raises(ConfigError, match="at most 64 allowed"):  # bounded: a file cannot ask for any number of rules
+        traffic_from_toml({"source": [{"link": "*"}] * 65}, "f.toml [traffic]")
+    with pytest.raises(ConfigError, match="obstacle_links"):
+        traffic_from_toml({"obstacle_links": ["udpin:0.0.0.0:1"] * 17}, "f.toml [traffic]")

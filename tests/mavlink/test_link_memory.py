@@ -8,7 +8,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.mavlink import messages as M
 from companion.errors import LinkError
 from companion.mavlink.link import MemoryLink
-from companion.mavlink.tlog import LOCKSTEP_EPOCH_S, TlogWriter, read_tlog
+from companion.mavlink.tlog import TlogWriter, read_tlog
+from companion.offline.harness import LOCKSTEP_EPOCH_S
 
 
 class SimClock:
@@ -83,7 +84,7 @@ def test_that_our_own_looped_back_traffic_is_dropped():
 def test_that_sent_and_received_packets_are_recorded_in_the_tlog_with_lockstep_epoch(tmp_path):
     clock = SimClock()
     path = tmp_path / "run.tlog"
-    link = MemoryLink(clock=clock, tlog=path)
+    link = MemoryLink(clock=clock, tlog=path, tlog_offset_s=LOCKSTEP_EPOCH_S)
     clock.t = 0.5
     sent = link.send(M.velocity_setpoint(500, [1, 0, 0]))
     link.deliver(0.75, vehicle_packet(HB))

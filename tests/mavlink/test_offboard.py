@@ -306,5 +306,6 @@ def test_that_every_transition_is_reported_as_an_event():
                {"heartbeat_timeout_s": float("inf")}],
 )
 def test_that_invalid_config_is_refused(kwargs):
-    with pytest.raises(ConfigError, match="offboard config"):
+    (key,) = kwargs
+    with pytest.raises(ConfigError, match=rf"^{key} = .* must be"):
         OffboardConfig(**kwargs)

@@ -4,6 +4,7 @@ import subprocess
 import sys
 import textwrap
 
+import numpy as np
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
@@ -151,3 +152,24 @@ def test_that_invalid_times_are_refused(tmp_path):
             log.write(float("nan"), b"\xfe")
     with pytest.raises(TlogError):
         TlogWriter(tmp_path / "e.tlog", flush_period_s=-1)
+
+
+def test_that_reading_a_large_corrupted_tlog_allocates_little_and_names_the_offset(tmp_path):
+    import tracemalloc
+
+    enc = mavlink2.MAVLink(None, 1, 1)
+    hb = bytes(mavlink2.MAVLink_heartbeat_message(2, 12, 0, 0, 4, 3).pack(enc))
+    path = tmp_path / "big.tlog"
+    stamp = 1_704_067_200_000_000
+    with open(path, "wb") as f:
+        for i in range(100):
+            f.write((stamp + i * 1000).to_bytes(8, "big") + hb)
+        f.write(np.random.default_rng(5).integers(0, 256, 5_000_000, dtype=np.uint8).tobytes())
+    tracemalloc.start()
+    try:
+        with pytest.raises(TlogError, match=rf"big\.tlog: .* byte offset {100 * (8 + len(hb))}"):
+            list(read_tlog(path))
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 1_000_000

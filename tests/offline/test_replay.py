@@ -12,7 +12,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.cli import main
 from companion.offline.harness import run_lockstep
 from companion.offline.replay import ReplayError, replay
-from companion.mavlink.tlog import LOCKSTEP_EPOCH_S, TlogError, TlogWriter, read_tlog
+from companion.mavlink.tlog import TlogError, TlogWriter, read_tlog
+from companion.offline.harness import LOCKSTEP_EPOCH_S
 
 SCENARIO = "configs/antipodal.toml"
 T0 = 1_700_000_000.0  # a Unix time, outside the lockstep epoch window

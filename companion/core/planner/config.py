@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from companion import validation as check
 from companion.core.planner.vehicle_model import AxisResponse
 from companion.errors import ConfigError
 
@@ -25,48 +26,26 @@ logger = logging.getLogger(__name__)
 #: the overlap of Gaussians; ``deterministic`` and ``bhattacharyya`` are baselines.
 FORMULATIONS: tuple[str, ...] = ("hyperplane", "paper", "deterministic", "bhattacharyya")
 
+#: Smallest ``replan_work_budget``: one QP solve plus a few dozen ADMM iterations.
+MIN_WORK_BUDGET = 200
+
 #: Spatial dimension of the planner (3-D NED); the overlap module also handles 2-D.
 DIM = 3
 
 
-def _positive(name: str, value: float, *, allow_inf: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} = {value!r} is not a number") from None
-    if math.isnan(v) or v <= 0.0 or (math.isinf(v) and not allow_inf):
-        bound = "positive (inf allowed)" if allow_inf else "positive and finite"
-        raise ConfigError(f"{name} = {value!r} must be {bound}")
-    return v
-
-
-def _nonnegative(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} = {value!r} is not a number") from None
-    if not math.isfinite(v) or v < 0.0:
-        raise ConfigError(f"{name} = {value!r} must be finite and >= 0")
-    return v
-
-
-def _int_at_least(name: str, value: Any, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ConfigError(f"{name} = {value!r} must be an integer")
-    if value < low:
-        raise ConfigError(f"{name} = {value!r} must be >= {low}")
-    return int(value)
+#: Largest accepted ``horizon_steps`` and ``scp_max_iterations`` / ``solver_max_iter``: a
+#: scenario file may not make one replan allocate or iterate without bound.
+MAX_HORIZON_STEPS = 400
+MAX_SCP_ITERATIONS = 100
+MAX_SOLVER_ITERATIONS = 100_000
+#: Largest ``replan_work_budget`` (ADMM iterations summed over a replan's QPs).
+MAX_WORK_BUDGET = 10_000_000
 
 
 def _axis_vector(name: str, value: Any) -> tuple[float, float, float]:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} = {value!r} must be three positive numbers (north, east, down)") from None
-    if arr.shape == ():
-        arr = np.full(DIM, float(arr))
-    if arr.shape != (DIM,) or not np.all(np.isfinite(arr)) or np.any(arr <= 0.0):
-        raise ConfigError(f"{name} = {value!r} must be three positive finite numbers (north, east, down)")
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = [value] * DIM
+    arr = check.vector3(name, value, positive=True)
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
@@ -81,16 +60,6 @@ def _vehicle_response(value: Any) -> tuple[AxisResponse, AxisResponse]:
     if isinstance(value, tuple) and len(value) == 2 and all(isinstance(v, AxisResponse) for v in value):
         return value
     raise ConfigError(f"vehicle_response must be a table with horizontal and vertical, got {value!r}")
-
-
-def _confidence(name: str, value: Any) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} = {value!r} is not a number") from None
-    if not (0.0 < v < 1.0):
-        raise ConfigError(f"{name} = {value!r} must be a confidence strictly between 0 and 1")
-    return v
 
 
 @dataclass(frozen=True)
@@ -189,6 +158,15 @@ class PlannerConfig:
     solver_rho : float
         OSQP's initial ADMM step size, restored before every QP of the SCP (see
         :mod:`companion.core.planner.osqp_qp`).
+    replan_work_budget : int
+        Compute budget of one replan in work units, never wall time, so a replan's
+        result does not depend on the machine: one unit per ADMM iteration, summed over
+        every QP of the replan (hard, least-slack, capped and last-resort soft QPs), plus
+        :data:`companion.core.planner.budget.QP_SOLVE_WORK` units per QP solved (its
+        linearisation, update, factorisation and exact recheck, which grow with the SCP
+        iterations). When it runs out the planner returns its best safe iterate or fails
+        (status ``'failed'``: the loop brakes). The default keeps the largest replan of
+        the shipped scenes well under the 0.3 s replan period (docs/PLANNER_BUDGET.md).
     """
 
     formulation: str = "hyperplane"
@@ -219,43 +197,33 @@ class PlannerConfig:
     solver_polish: bool = False
     solver_max_iter: int = 2000
     solver_rho: float = 0.1
+    replan_work_budget: int = 12000
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
-        if self.formulation not in FORMULATIONS:
-            raise ConfigError(f"formulation = {self.formulation!r} is not one of {', '.join(FORMULATIONS)}")
-        set_("horizon_steps", _int_at_least("horizon_steps", self.horizon_steps, 2))
-        set_("step_s", _positive("step_s", self.step_s))
-        set_("replan_period_s", _positive("replan_period_s", self.replan_period_s))
-        set_("c_min", _confidence("c_min", self.c_min))
+        check.choice("formulation", self.formulation, FORMULATIONS)
+        set_("horizon_steps", check.integer("horizon_steps", self.horizon_steps, lo=2, hi=MAX_HORIZON_STEPS))
+        for name in ("step_s", "replan_period_s", "weight_terminal", "slack_penalty", "c_max_penalty", "scp_tolerance",
+                     "scp_tolerance_warm", "trust_region_mps", "trust_region_lam", "solver_eps", "solver_rho"):
+            set_(name, check.number(name, getattr(self, name), positive=True))
+        for name in ("velocity_time_constant_s", "drone_radius_m", "weight_jerk", "weight_velocity", "weight_progress",
+                     "solver_eps_rel"):
+            set_(name, check.number(name, getattr(self, name), lo=0.0))
+        set_("sensing_range_m", check.number("sensing_range_m", self.sensing_range_m, positive=True, allow_inf=True))
+        set_("c_min", check.number("c_min", self.c_min, positive=True, below=1.0))
         if self.c_max is not None:
-            set_("c_max", _confidence("c_max", self.c_max))
+            set_("c_max", check.number("c_max", self.c_max, positive=True, below=1.0))
             if self.c_max <= self.c_min:
                 raise ConfigError(f"c_max = {self.c_max!r} must be greater than c_min = {self.c_min!r}")
         set_("velocity_max_mps", _axis_vector("velocity_max_mps", self.velocity_max_mps))
         set_("accel_max_mps2", _axis_vector("accel_max_mps2", self.accel_max_mps2))
-        set_("velocity_time_constant_s", _nonnegative("velocity_time_constant_s", self.velocity_time_constant_s))
+        set_("scp_max_iterations", check.integer("scp_max_iterations", self.scp_max_iterations, lo=1, hi=MAX_SCP_ITERATIONS))
+        set_("solver_max_iter", check.integer("solver_max_iter", self.solver_max_iter, lo=1, hi=MAX_SOLVER_ITERATIONS))
+        check.boolean("solver_polish", self.solver_polish)
         if self.vehicle_response is not None:
             set_("vehicle_response", _vehicle_response(self.vehicle_response))
-        set_("drone_radius_m", _nonnegative("drone_radius_m", self.drone_radius_m))
-        set_("sensing_range_m", _positive("sensing_range_m", self.sensing_range_m, allow_inf=True))
-        set_("weight_terminal", _positive("weight_terminal", self.weight_terminal))
-        set_("weight_jerk", _nonnegative("weight_jerk", self.weight_jerk))
-        set_("weight_velocity", _nonnegative("weight_velocity", self.weight_velocity))
-        set_("weight_progress", _nonnegative("weight_progress", self.weight_progress))
-        set_("slack_penalty", _positive("slack_penalty", self.slack_penalty))
-        set_("c_max_penalty", _positive("c_max_penalty", self.c_max_penalty))
-        set_("scp_tolerance", _positive("scp_tolerance", self.scp_tolerance))
-        set_("scp_tolerance_warm", _positive("scp_tolerance_warm", self.scp_tolerance_warm))
-        set_("scp_max_iterations", _int_at_least("scp_max_iterations", self.scp_max_iterations, 1))
-        set_("trust_region_mps", _positive("trust_region_mps", self.trust_region_mps))
-        set_("trust_region_lam", _positive("trust_region_lam", self.trust_region_lam))
-        set_("solver_eps", _positive("solver_eps", self.solver_eps))
-        set_("solver_eps_rel", _nonnegative("solver_eps_rel", self.solver_eps_rel))
-        set_("solver_max_iter", _int_at_least("solver_max_iter", self.solver_max_iter, 1))
-        set_("solver_rho", _positive("solver_rho", self.solver_rho))
-        if not isinstance(self.solver_polish, bool):
-            raise ConfigError(f"solver_polish = {self.solver_polish!r} must be true or false")
+        set_("replan_work_budget", check.integer("replan_work_budget", self.replan_work_budget, lo=MIN_WORK_BUDGET,
+                                                 hi=MAX_WORK_BUDGET))
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
@@ -281,18 +249,8 @@ class PlannerConfig:
         ConfigError
             On an unknown key or an invalid value; the message names source, key and value.
         """
-        known = set(cls.field_names())
-        merged = {**dict(table), **overrides}
-        for key, value in merged.items():
-            if key not in known:
-                raise ConfigError(
-                    f"{source}: unknown key {key!r} (value {value!r}); expected one of {', '.join(sorted(known))}"
-                )
-        kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in merged.items()}
-        try:
-            return cls(**kwargs)
-        except ConfigError as exc:
-            raise ConfigError(f"{source}: {exc}") from None
+        lists_as_tuples = {k: tuple(v) if isinstance(v, list) else v for k, v in check.table(source, table).items()}
+        return check.build_section(cls, lists_as_tuples, source, **overrides)
 
     @property
     def velocity_max(self) -> np.ndarray:

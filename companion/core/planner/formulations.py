@@ -45,6 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.core import overlap
+from companion.core.planner.request import PlanRequest
+from companion.core.planner.safety import RECHECK_TOL_M, RECHECK_TOL_SIGMA, SafetyFigures, exact_safety
 
 logger = logging.getLogger(__name__)
 
@@ -92,10 +94,14 @@ def _unit_separation(p_bar: np.ndarray, means: np.ndarray) -> np.ndarray:
     return np.where(norm > _TINY_M, d / np.maximum(norm, _TINY_M), fallback)
 
 
+#: A drone iterate this close to an obstacle mean (metres) is nudged off it (:func:`_nudge`).
+_NUDGE_M = 1e-6
+
+
 def _nudge(p_bar: np.ndarray, means: np.ndarray) -> np.ndarray:
     """Drone iterate moved off any obstacle mean it coincides with (minmax needs a direction)."""
     d = means - p_bar[None]
-    close = np.linalg.norm(d, axis=-1) <= 1e-6
+    close = np.linalg.norm(d, axis=-1) <= _NUDGE_M
     if not np.any(close):
         return np.broadcast_to(p_bar[None], means.shape)
     out = np.broadcast_to(p_bar[None], means.shape).copy()
@@ -103,10 +109,14 @@ def _nudge(p_bar: np.ndarray, means: np.ndarray) -> np.ndarray:
     return out
 
 
-def hyperplane_rows(p_bar, drone_covs, means, covs, radius_sum, r_min, r_max):
-    """Rows of the ``hyperplane`` formulation; also returns the minmax result at the iterate."""
-    mu1 = _nudge(p_bar, means)
-    res = overlap.minmax(mu1, np.broadcast_to(drone_covs[None], covs.shape), means, covs)
+def hyperplane_rows(p_bar, drone_covs, means, covs, radius_sum, r_min, r_max, separator=None):
+    """Rows of the ``hyperplane`` formulation; also returns the minmax result at the iterate.
+
+    ``separator``: the minmax result at the (nudged) iterate if already computed.
+    """
+    if separator is None:
+        separator = overlap.minmax(_nudge(p_bar, means), np.broadcast_to(drone_covs[None], covs.shape), means, covs)
+    res = separator
     n, ssum = res.normal, res.s1 + res.s2
     n_o = np.einsum("pnk,pnk->pn", n, means)
     lower = (r_min + BACKOFF_SIGMA) * ssum + radius_sum[:, None] - n_o   # -n.p >= r_min(s1+s2) + R - n.o
@@ -223,3 +233,172 @@ def relax_out_of_range(rows: ObstacleRows, in_range: np.ndarray) -> ObstacleRows
         adm_lam[off], adm_rhs[off] = 1.0, 0.5   # lam = 1/2 (any value; no obstacle row uses it)
     return ObstacleRows(coef_p=zero(rows.coef_p), lower=lower, upper=upper, coef_lam=zero(rows.coef_lam),
                         adm_p=zero(rows.adm_p), adm_lam=adm_lam, adm_rhs=adm_rhs)
+
+
+# --------------------------------------------------------------------------------------
+# The formulations as objects behind one protocol (the SCP never asks for a name).
+# --------------------------------------------------------------------------------------
+
+
+class Formulation:
+    """One collision formulation: its rows, its exact recheck and what its QP carries.
+
+    Subclasses set the class attributes and implement :meth:`rows` (and :meth:`recheck`
+    where the exact figures are not the minmax touch radius).
+
+    Parameters
+    ----------
+    r_min : float
+        Touch radius of ``c_min`` (Mahalanobis units).
+    r_max : float or None
+        Touch radius of ``c_max``; ``None`` without an upper bound.
+    drone_radius_m : float
+        Physical drone radius, metres.
+
+    Attributes
+    ----------
+    name : the ``[planner] formulation`` value.
+    carries_lam : whether the QP has the ``lam`` columns and admissibility rows (``paper``).
+    has_upper : whether the QP has the ``c_max`` rows (formulations that bound the overlap,
+        and only with ``r_max``).
+    wall_radius : Mahalanobis radius of the exact wall check (``r_min``; 0 for means only).
+    wall_row_radius : the same in the wall rows, with the back-off.
+    wall_row_backoff_m : back-off of the wall rows in metres.
+    """
+
+    name: str = ""
+    carries_lam: bool = False
+    bounds_overlap: bool = False
+
+    def __init__(self, r_min: float, r_max: float | None, drone_radius_m: float) -> None:
+        self.r_min = float(r_min)
+        self.r_max = None if r_max is None else float(r_max)
+        self.drone_radius_m = float(drone_radius_m)
+        self.has_upper = self.bounds_overlap and self.r_max is not None
+        self.wall_radius = self.r_min
+        self.wall_row_radius = self.r_min + BACKOFF_SIGMA
+        self.wall_row_backoff_m = 0.0
+        self._separator: tuple[PlanRequest, np.ndarray, overlap.MinmaxResult] | None = None
+
+    def rows(self, request: PlanRequest, positions: np.ndarray, lam: np.ndarray | None) -> ObstacleRows:
+        """Linearised obstacle rows around ``positions`` (N, 3) (and ``lam`` (P, N) if carried)."""
+        raise NotImplementedError
+
+    def initial_lam(self, request: PlanRequest, positions: np.ndarray) -> np.ndarray | None:
+        """Starting ``lam`` (P, N) at ``positions`` for formulations that carry it, else ``None``."""
+        return None
+
+    def wall_upper(self, request: PlanRequest) -> np.ndarray:
+        """Right-hand sides (W, N) of the wall rows ``a.p_i <= b - r sqrt(a' S_i a) - R_drone``."""
+        spread = np.sqrt(np.einsum("wk,nkl,wl->wn", request.walls_normal, request.drone_covs, request.walls_normal))
+        upper = request.walls_offset[:, None] - self.wall_row_radius * spread - self.drone_radius_m
+        return upper - self.wall_row_backoff_m if self.wall_row_backoff_m else upper
+
+    def recheck(self, request: PlanRequest, positions: np.ndarray, in_range: np.ndarray) -> tuple[SafetyFigures, bool]:
+        """Exact figures of ``positions`` and whether this formulation's own constraints hold on them."""
+        figs = self._exact(request, positions)
+        return figs, self._walls_hold(figs) and bool(np.all(figs.eta[in_range] >= self.r_min - RECHECK_TOL_SIGMA))
+
+    def separator(self, request: PlanRequest, positions: np.ndarray) -> overlap.MinmaxResult:
+        """Minmax of the drone at ``positions`` (N, 3) against every obstacle (P, N), nudged off coincident means.
+
+        The last result is kept: the SCP's exact recheck of an iterate and the next
+        linearisation around it ask for the same one.
+        """
+        mu1 = _nudge(positions, request.obstacle_means)
+        cached = self._separator
+        if cached is not None and cached[0] is request and np.array_equal(cached[1], mu1):
+            return cached[2]
+        res = request.covariance_pairs.minmax(mu1, request.obstacle_means)
+        self._separator = (request, np.array(mu1), res)
+        return res
+
+    def _exact(self, request: PlanRequest, positions: np.ndarray) -> SafetyFigures:
+        nudged = request.num_obstacles and bool(np.any(
+            np.linalg.norm(request.obstacle_means - positions[None], axis=-1) <= _NUDGE_M))
+        separator = None if nudged or not request.num_obstacles else self.separator(request, positions)
+        return exact_safety(request, positions, self.drone_radius_m, self.wall_radius, separator)
+
+    @staticmethod
+    def _walls_hold(figs: SafetyFigures) -> bool:
+        return bool(np.all(figs.wall_margin >= -RECHECK_TOL_M))
+
+    def _radius_sum(self, request: PlanRequest) -> np.ndarray:
+        return request.obstacle_radii + self.drone_radius_m
+
+
+class Hyperplane(Formulation):
+    """``hyperplane``: the minmax separating plane at the iterate, exact in ``p_i``."""
+
+    name = "hyperplane"
+    bounds_overlap = True
+
+    def rows(self, request, positions, lam=None):
+        rows, _ = hyperplane_rows(positions, request.drone_covs, request.obstacle_means, request.obstacle_covs,
+                                  self._radius_sum(request), self.r_min, self.r_max, self.separator(request, positions))
+        return rows
+
+
+class Paper(Formulation):
+    """``paper``: the paper's joint ``(p, lam)`` formulation with the admissibility rows."""
+
+    name = "paper"
+    carries_lam = True
+    bounds_overlap = True
+
+    def rows(self, request, positions, lam):
+        return paper_rows(positions, lam, request.drone_covs, request.obstacle_means, request.obstacle_covs,
+                          self._radius_sum(request), self.r_min, self.r_max)
+
+    def initial_lam(self, request, positions):
+        if request.num_obstacles == 0:
+            return np.zeros((0, request.horizon_steps))
+        return np.clip(self.separator(request, positions).lam, LAM_EPS, 1.0 - LAM_EPS)
+
+
+class Deterministic(Formulation):
+    """``deterministic`` baseline: means and radii only (no covariance in rows or walls)."""
+
+    name = "deterministic"
+
+    def __init__(self, r_min: float, r_max: float | None, drone_radius_m: float) -> None:
+        super().__init__(r_min, r_max, drone_radius_m)
+        self.wall_radius = 0.0
+        self.wall_row_radius = 0.0
+        self.wall_row_backoff_m = BACKOFF_M
+
+    def rows(self, request, positions, lam=None):
+        return deterministic_rows(positions, request.obstacle_means, self._radius_sum(request))
+
+    def recheck(self, request, positions, in_range):
+        figs = self._exact(request, positions)
+        return figs, self._walls_hold(figs) and bool(np.all(figs.distance_margin[in_range] >= -RECHECK_TOL_M))
+
+
+class Bhattacharyya(Formulation):
+    """``bhattacharyya`` baseline: the radius-aware Bhattacharyya distance bounded below."""
+
+    name = "bhattacharyya"
+
+    def rows(self, request, positions, lam=None):
+        return bhattacharyya_rows(positions, request.drone_covs, request.obstacle_means, request.obstacle_covs,
+                                  self._radius_sum(request), self.r_min)
+
+    def recheck(self, request, positions, in_range):
+        figs = self._exact(request, positions)
+        ok = self._walls_hold(figs)
+        if request.num_obstacles:
+            value, _ = signed_bhattacharyya(positions, request.drone_covs, request.obstacle_means,
+                                            request.obstacle_covs, self._radius_sum(request))
+            margin = value - 0.5 * self.r_min**2
+            ok &= bool(np.all(margin[in_range] >= -self.r_min * RECHECK_TOL_SIGMA))
+        return figs, ok
+
+
+#: The formulation class of each ``[planner] formulation`` value.
+BY_NAME: dict[str, type[Formulation]] = {cls.name: cls for cls in (Hyperplane, Paper, Deterministic, Bhattacharyya)}
+
+
+def make_formulation(name: str, r_min: float, r_max: float | None, drone_radius_m: float) -> Formulation:
+    """The formulation object for ``name`` (one of :data:`companion.core.planner.config.FORMULATIONS`)."""
+    return BY_NAME[name](r_min, r_max, drone_radius_m)

@@ -52,6 +52,8 @@ class QpSolution:
     usable : whether the status is solved or solved-inaccurate.
     accurate : whether the status is solved.
     iterations : ADMM iterations.
+    solve_time_s : OSQP's own time for this solve (its ``info.solve_time``), seconds; a
+        diagnostic only (benchmarks compare the replan time with it).
     """
 
     x: np.ndarray
@@ -61,6 +63,7 @@ class QpSolution:
     usable: bool
     accurate: bool
     iterations: int
+    solve_time_s: float = 0.0
 
 
 class OsqpQp:
@@ -141,5 +144,5 @@ class OsqpQp:
             x=np.array(r.x, dtype=float), y=np.array(r.y, dtype=float),
             objective=float(r.info.obj_val), status=str(r.info.status),
             usable=status in _ACCEPTABLE and np.all(np.isfinite(r.x)), accurate=status in _SOLVED,
-            iterations=int(r.info.iter),
+            iterations=int(r.info.iter), solve_time_s=float(r.info.solve_time),
         )

@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
+from companion.core import small_matrix
+from companion.core.overlap import CovariancePairs
 from companion.errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -46,9 +49,11 @@ def _check_covariances(name: str, covs: np.ndarray) -> None:
     if np.any(bad):
         idx = tuple(int(i) for i in np.argwhere(bad)[0])
         raise InputError(f"{name}{list(idx)} is not symmetric: {covs[idx].tolist()}")
-    eig_min = np.linalg.eigvalsh(covs)[..., 0]
-    if np.any(eig_min <= 0.0):
-        idx = tuple(int(i) for i in np.argwhere(eig_min <= 0.0)[0])
+    # Sylvester's criterion in closed form (the 3x3 kernel); eigenvalues only to word an error
+    pd = small_matrix.is_positive_definite(np.moveaxis(covs.reshape(-1, 3, 3), 0, -1)).reshape(covs.shape[:-2])
+    if not np.all(pd):
+        eig_min = np.linalg.eigvalsh(covs)[..., 0]
+        idx = tuple(int(i) for i in np.argwhere(~pd)[0])
         raise InputError(f"{name}{list(idx)} is not positive definite (smallest eigenvalue {eig_min[idx]:.3g} m^2)")
 
 
@@ -139,6 +144,16 @@ class PlanRequest:
         mask.setflags(write=False)
         set_("upper_bound_mask", mask)
 
+    @cached_property
+    def covariance_pairs(self) -> CovariancePairs:
+        """Drone and obstacle covariances as validated pairs over (P, N), built once per request.
+
+        Every minmax of this request (each SCP iterate's rows, the exact recheck) reuses
+        them instead of validating the covariances again.
+        """
+        return CovariancePairs.from_arrays(np.broadcast_to(self.drone_covs[None], self.obstacle_covs.shape),
+                                           self.obstacle_covs)
+
     @property
     def horizon_steps(self) -> int:
         """``N``, the number of predicted steps."""
@@ -203,7 +218,13 @@ class Plan:
     formulation : str
         Which formulation produced the plan.
     notes : tuple of str
-        Diagnostics, e.g. ``'max_iterations'``, ``'c_max_violated'``, solver messages.
+        Diagnostics, e.g. ``'max_iterations'``, ``'c_max_violated'``, ``'work_budget: ...'``,
+        solver messages.
+    work : int
+        Work units this replan spent (ADMM iterations of all its QPs plus a fixed charge
+        per QP, :mod:`companion.core.planner.budget`); at most ``replan_work_budget``.
+    admm_iterations : int
+        ADMM iterations summed over all QPs of this replan.
     """
 
     velocities: np.ndarray
@@ -222,6 +243,8 @@ class Plan:
     commands: np.ndarray
     initial_velocity: np.ndarray
     notes: tuple[str, ...] = ()
+    work: int = 0
+    admm_iterations: int = 0
 
     @property
     def ok(self) -> bool:

@@ -47,7 +47,8 @@ class SafetyFigures:
     lam: np.ndarray
 
 
-def exact_safety(request: PlanRequest, positions: np.ndarray, drone_radius_m: float, wall_radius: float) -> SafetyFigures:
+def exact_safety(request: PlanRequest, positions: np.ndarray, drone_radius_m: float, wall_radius: float,
+                 separator: overlap.MinmaxResult | None = None) -> SafetyFigures:
     """Exact safety figures of ``positions`` (N, 3) against the request's obstacles and walls.
 
     Parameters
@@ -60,13 +61,14 @@ def exact_safety(request: PlanRequest, positions: np.ndarray, drone_radius_m: fl
         Physical drone radius, metres.
     wall_radius : float
         Mahalanobis radius used for the wall chance constraint (``r_min``; 0 for means only).
+    separator : MinmaxResult, optional
+        The minmax of ``positions`` against the obstacles if already computed (P, N).
     """
     P, N = request.num_obstacles, request.horizon_steps
     radius_sum = request.obstacle_radii[:, None] + drone_radius_m
     if P:
         mu1 = np.broadcast_to(positions[None], (P, N, 3))
-        cov1 = np.broadcast_to(request.drone_covs[None], (P, N, 3, 3))
-        res = overlap.minmax(mu1, cov1, request.obstacle_means, request.obstacle_covs)
+        res = separator if separator is not None else request.covariance_pairs.minmax(mu1, request.obstacle_means)
         delta = request.obstacle_means - mu1
         eta = (np.einsum("pnk,pnk->pn", res.normal, delta) - radius_sum) / (res.s1 + res.s2)
         lam = res.lam
@@ -85,15 +87,3 @@ def exact_safety(request: PlanRequest, positions: np.ndarray, drone_radius_m: fl
         distance_margin=distance,
         lam=lam,
     )
-
-
-def bhattacharyya_margin(request: PlanRequest, positions: np.ndarray, drone_radius_m: float, d_min: float) -> np.ndarray:
-    """Radius-aware Bhattacharyya distance minus ``d_min`` per obstacle and step (P, N)."""
-    from companion.core.planner.formulations import signed_bhattacharyya
-
-    P, N = request.num_obstacles, request.horizon_steps
-    if not P:
-        return np.zeros((0, N))
-    value, _ = signed_bhattacharyya(positions, request.drone_covs, request.obstacle_means, request.obstacle_covs,
-                                    request.obstacle_radii + drone_radius_m)
-    return value - d_min

@@ -4,7 +4,7 @@ Each SCP iteration linearises the collision rows around the current iterate
 (:mod:`companion.core.planner.formulations`), writes them into the fixed QP pattern
 (:mod:`companion.core.planner.qp_layout`), updates OSQP in place and solves: the hard QP
 (safety slacks pinned), or, if its safety rows cannot all hold, the least-violation pair
-of QPs (:meth:`Planner._least_violation`). It stops when the cost changes by less than
+of QPs (:func:`companion.core.planner.qp_step.least_violation`). It stops when the cost changes by less than
 ``scp_tolerance`` (relative; ``scp_tolerance_warm`` for a replan warm-started from the
 previous plan), or the iterate no longer moves, *and* the exact recheck on the new
 iterate passes (or the same slack is needed again: the violation is forced); or at the
@@ -20,45 +20,43 @@ Cost (``0.5 x'Px + q'x + const``)::
 Positions obey the paper's holonomic model ``p_i = p_{i-1} + tau V_i``, or with a velocity
 lag ``p_i = p_{i-1} + b V_i + c V_{i-1}`` (:mod:`companion.core.planner.vehicle_model`).
 
-The only clock is ``time.perf_counter()``, read for the ``solve_time_s`` diagnostic; it
-never influences the plan (no time limit is handed to the solver).
+Every replan runs within ``replan_work_budget`` work units (ADMM iterations of all its
+QPs plus a fixed charge per QP, :mod:`companion.core.planner.budget`); when they run
+out the plan is the best safe iterate (the last QP's solution, else the SCP's start,
+whichever passes the exact recheck) or ``failed``. The only clock is
+``time.perf_counter()``, read for the ``solve_time_s`` diagnostic; it never influences
+the plan (no time limit is handed to the solver).
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
-
 import numpy as np
 
+from collections.abc import Mapping
+from types import MappingProxyType
+
 from companion.core import overlap
-from companion.errors import InputError
-from companion.core.planner import formulations as F
+from companion.core.planner.budget import WorkBudget
 from companion.core.planner.config import PlannerConfig
-from companion.core.planner.osqp_qp import OsqpQp, QpSolution
+from companion.core.planner.formulations import Formulation, ObstacleRows, make_formulation, relax_out_of_range
+from companion.core.planner.osqp_qp import OsqpQp
 from companion.core.planner.qp_data import RequestData
 from companion.core.planner.qp_layout import QpLayout
+from companion.core.planner.qp_step import SLACK_TOL, QpStep, QpWorkspace, solve_qp
 from companion.core.planner.request import Plan, PlanRequest
-from companion.core.planner.safety import (RECHECK_TOL_M, RECHECK_TOL_SIGMA, SafetyFigures, bhattacharyya_margin,
-                                      exact_safety)
 from companion.core.planner.vehicle_model import model_from_config
+from companion.errors import InputError
 
 logger = logging.getLogger(__name__)
 
-#: A slack above this (units of its row) means the constraint it relaxes is violated.
-SLACK_TOL = 1e-4
 #: The same for the ``c_max`` slack. It stays free and penalised even in the hard QP (see
 #: ``_qp_step``), so OSQP leaves it at its tolerance times the penalty's pull rather than
 #: at zero: 5e-4 measured on a feasible ``c_max`` (contour 0.6019 against 0.6).
 C_MAX_SLACK_TOL = 1e-3
-#: Proximal weight on the velocities (s^2/m^2) against the safety slack (1 per unit) in
-#: the least-violation QP (:meth:`Planner._least_violation`).
-LEAST_VIOLATION_PROX = 1e-3
-#: Room left above the least slack of each violated row when the cost is then minimised
-#: (units of the row). With 1e-4 the capped QP was so thin that OSQP hit its iteration
-#: cap on the cvxpy cross-check case; 1e-2 solved it in 1450 iterations.
-LEAST_VIOLATION_MARGIN = 1e-2
+#: Work "budget" of :meth:`Planner.qp_step` (a single QP for cross-checks): never binds.
+UNBUDGETED_WORK = 10**15
 #: The SCP has converged when no velocity moves by more than this between iterates, m/s.
 STEP_TOL_MPS = 1e-4
 
@@ -77,43 +75,6 @@ def _right_bulge_velocities(route: np.ndarray, n_steps: int, step_s: float) -> n
     right = np.array([-h[1], h[0], 0.0]) / np.linalg.norm(h) if np.linalg.norm(h) > 1e-9 else np.array([0.0, 1.0, 0.0])
     offset = HEAD_ON_BIAS_M * np.sin(np.pi * np.arange(n_steps + 1) / n_steps)
     return np.diff(offset)[:, None] / step_s * right
-
-
-@dataclass(frozen=True)
-class QpStep:
-    """One QP of the SCP, solved at a given linearisation point (exposed for cross-checks).
-
-    Attributes
-    ----------
-    velocities, positions : (N, 3) solution.
-    lam : (P, N) overlap parameters (``paper``; else the iterate's minmax ``lam``).
-    slack_obstacle, slack_upper, slack_wall : (P, N), (P, N), (W, N) slacks at the solution.
-    objective : cost at the solution including constants and slack penalties (slacks clipped at 0).
-    cost : ``objective`` without the slack penalties (terminal + jerk + effort).
-    rows : the linearised obstacle rows used.
-    velocity_lower, velocity_upper : (N, 3) velocity box (bounds ∩ trust region).
-    lam_lower, lam_upper : (P, N) ``lam`` box (``paper``).
-    wall_upper : (W, N) right-hand sides of the wall rows.
-    v0 : (3,) the current velocity used by the acceleration and jerk terms.
-    solution : the raw OSQP result.
-    """
-
-    velocities: np.ndarray
-    positions: np.ndarray
-    lam: np.ndarray
-    slack_obstacle: np.ndarray
-    slack_upper: np.ndarray
-    slack_wall: np.ndarray
-    objective: float
-    cost: float
-    rows: F.ObstacleRows
-    velocity_lower: np.ndarray
-    velocity_upper: np.ndarray
-    lam_lower: np.ndarray
-    lam_upper: np.ndarray
-    wall_upper: np.ndarray
-    v0: np.ndarray
-    solution: QpSolution
 
 
 class Planner:
@@ -136,9 +97,10 @@ class Planner:
         self.config = config
         self.r_min = float(overlap.touch_radius(config.c_min, 3))
         self.r_max = None if config.c_max is None else float(overlap.touch_radius(config.c_max, 3))
+        self.formulation: Formulation = make_formulation(config.formulation, self.r_min, self.r_max,
+                                                         config.drone_radius_m)
         self.lag = model_from_config(config.step_s, config.velocity_time_constant_s, config.vehicle_response)
-        self._qps: dict[tuple[int, int, int], tuple[QpLayout, OsqpQp | None]] = {}
-        self._last_y: dict[tuple[int, int, int], np.ndarray] = {}
+        self._workspaces: dict[tuple[int, int, int], QpWorkspace] = {}
 
     # ------------------------------------------------------------------ public API
     def solve(self, request: PlanRequest, warm_start: Plan | None = None) -> Plan:
@@ -158,16 +120,17 @@ class Planner:
             Never raises on a solver failure: the status says ``'failed'``.
         """
         t0 = time.perf_counter()
-        cfg = self.config
-        self._check(request)
-        layout = self._layout(request)
-        data = RequestData(self.config, self.r_min, layout, request)
-        last_y = self._last_y.get((layout.N, layout.P, layout.W))
-        if warm_start is not None and last_y is not None:
-            data.y_warm = last_y[layout.shift_rows]
-        v_bar = self._initial_velocities(request, data.v0, warm_start)
+        cfg, form = self.config, self.formulation
+        ws = self._workspace(request)
+        layout = ws.layout
+        y_warm = ws.last_y[layout.shift_rows] if warm_start is not None and ws.last_y is not None else None
+        data = RequestData.build(cfg, form, layout, request, y_warm)
+        ws.start(data)
+        v_bar = self.initial_velocities(request, data.v0, warm_start)
         p_bar = self.lag.positions(request.position, data.v0, v_bar)
-        lam_bar = self._initial_lam(request, p_bar) if cfg.formulation == "paper" else None
+        lam_bar = form.initial_lam(request, p_bar)
+        v_start = v_bar
+        budget = WorkBudget(cfg.replan_work_budget)
         notes: list[str] = []
         step: QpStep | None = None
         j_prev, slack_prev = np.inf, np.inf
@@ -175,7 +138,12 @@ class Planner:
         converged = False
         tolerance = cfg.scp_tolerance if warm_start is None else cfg.scp_tolerance_warm
         for iterations in range(1, cfg.scp_max_iterations + 1):
-            new = self._qp_step(layout, data, request, v_bar, p_bar, lam_bar, first=iterations == 1)
+            new = solve_qp(cfg, form, ws, data, v_bar, p_bar, lam_bar, budget, first=iterations == 1,
+                           try_hard=step is None or not step.least_violation)
+            if new is None:              # the work budget ran out before this QP was solved
+                iterations -= 1
+                notes.append(f"work_budget: {budget.used} of {budget.total} units spent")
+                break
             if not new.solution.usable:
                 notes.append(f"solver: {new.solution.status} at iteration {iterations}")
                 break
@@ -184,7 +152,7 @@ class Planner:
             step = new
             moved = float(np.max(np.abs(step.velocities - v_bar)))
             v_bar, p_bar = step.velocities, step.positions
-            lam_bar = step.lam if cfg.formulation == "paper" else None
+            lam_bar = step.lam if form.carries_lam else None
             # convergence on the cost without penalties: slacks at OSQP's tolerance times the
             # large penalty would add noise of order eps * rho to J
             small = moved <= STEP_TOL_MPS or abs(step.cost - j_prev) <= tolerance * max(1.0, abs(step.cost))
@@ -193,68 +161,58 @@ class Planner:
             # same last time: then the violation is forced (e.g. by the current state) and
             # further iterations only repeat it (they ran to the cap, measured in the corridor)
             slack = self._safety_slack(data, step)
-            if small and (self._recheck(request, data, step.positions)[1]
+            if small and (form.recheck(request, step.positions, data.in_range)[1]
                           or (slack > SLACK_TOL and abs(slack - slack_prev) <= SLACK_TOL)):
                 converged = True
                 break
             slack_prev = slack
         if step is not None:
-            self._last_y[(layout.N, layout.P, layout.W)] = step.solution.y
+            ws.last_y = step.solution.y
         if not converged and step is not None and len(notes) == 0:
             notes.append("max_iterations")
-        return self._finish(request, data, step, v_bar, iterations, notes, t0)
+        return self._finish(request, data, step, v_bar, v_start, iterations, budget, notes, t0)
 
     def qp_step(self, request: PlanRequest, velocities: np.ndarray, lam: np.ndarray | None = None) -> QpStep:
         """Solve the single QP of the SCP linearised at ``velocities`` (N, 3) (and ``lam``).
 
         Exposed so that tests can compare one QP with an independent model of it.
         """
-        self._check(request)
-        layout = self._layout(request)
-        data = RequestData(self.config, self.r_min, layout, request)
+        ws = self._workspace(request)
+        data = RequestData.build(self.config, self.formulation, ws.layout, request)
+        ws.start(data)
         v_bar = np.asarray(velocities, dtype=float)
         p_bar = self.lag.positions(request.position, data.v0, v_bar)
-        if self.config.formulation == "paper" and lam is None:
-            lam = self._initial_lam(request, p_bar)
-        return self._qp_step(layout, data, request, v_bar, p_bar, lam, first=True)
+        if self.formulation.carries_lam and lam is None:
+            lam = self.formulation.initial_lam(request, p_bar)
+        unbudgeted = WorkBudget(UNBUDGETED_WORK)     # one QP for a cross-check, not a replan
+        return solve_qp(self.config, self.formulation, ws, data, v_bar, p_bar, lam, unbudgeted, first=True)
 
     def linearise(self, request: PlanRequest, positions: np.ndarray, lam: np.ndarray | None = None,
-                  in_range: np.ndarray | None = None) -> F.ObstacleRows:
+                  in_range: np.ndarray | None = None) -> ObstacleRows:
         """Linearised obstacle rows of this planner's formulation around ``positions`` (N, 3)."""
-        cfg = self.config
-        radius_sum = request.obstacle_radii + cfg.drone_radius_m
-        args = (positions, request.drone_covs, request.obstacle_means, request.obstacle_covs)
-        if cfg.formulation == "hyperplane":
-            rows, _ = F.hyperplane_rows(*args, radius_sum, self.r_min, self.r_max)
-        elif cfg.formulation == "paper":
-            rows = F.paper_rows(positions, lam, *args[1:], radius_sum, self.r_min, self.r_max)
-        elif cfg.formulation == "deterministic":
-            rows = F.deterministic_rows(positions, request.obstacle_means, radius_sum)
-        else:
-            rows = F.bhattacharyya_rows(*args, radius_sum, self.r_min)
+        rows = self.formulation.rows(request, positions, lam)
         if in_range is not None:
-            rows = F.relax_out_of_range(rows, in_range)
+            rows = relax_out_of_range(rows, in_range)
         return rows
 
-    # ------------------------------------------------------------------ internals
-    def _check(self, request: PlanRequest) -> None:
-        if not isinstance(request, PlanRequest):
-            raise TypeError(f"request must be a PlanRequest, got {type(request).__name__}")
-        if request.horizon_steps != self.config.horizon_steps:
-            raise InputError(f"request has {request.horizon_steps} steps, the planner is configured "
-                             f"for horizon_steps = {self.config.horizon_steps}")
+    @property
+    def workspaces(self) -> Mapping[tuple[int, int, int], QpWorkspace]:
+        """Read-only view of the per-shape workspaces, keyed by ``(N, P, W)`` (for inspection and tests)."""
+        return MappingProxyType(self._workspaces)
 
-    def _layout(self, request: PlanRequest) -> QpLayout:
-        key = (request.horizon_steps, request.num_obstacles, request.num_walls)
-        if key not in self._qps:
-            layout = QpLayout(*key, paper=self.config.formulation == "paper",
-                              upper=self.r_max is not None and self.config.formulation in ("hyperplane", "paper"),
-                              step_s=self.config.step_s, lag=self.lag)
-            self._qps[key] = (layout, None)
-            logger.debug("planner: new QP shape N=%d P=%d W=%d (n=%d, m=%d)", *key, layout.n, layout.m)
-        return self._qps[key][0]
+    def layout(self, shape: tuple[int, int, int]) -> QpLayout:
+        """The QP pattern of a shape ``(N, P, W)`` this planner has solved (KeyError otherwise)."""
+        return self._workspaces[shape].layout
 
-    def _initial_velocities(self, request: PlanRequest, v0: np.ndarray, warm_start: Plan | None) -> np.ndarray:
+    def solver(self, shape: tuple[int, int, int]) -> OsqpQp | None:
+        """The OSQP solver of a shape ``(N, P, W)`` (None before its first QP; KeyError for an unseen shape)."""
+        return self._workspaces[shape].qp
+
+    def initial_velocities(self, request: PlanRequest, v0: np.ndarray, warm_start: Plan | None) -> np.ndarray:
+        """The SCP's first iterate (N, 3), m/s: the shifted warm start, else a line to the target.
+
+        Projected onto the speed and acceleration bounds (forward pass from ``v0``).
+        """
         cfg = self.config
         N, tau = cfg.horizon_steps, cfg.step_s
         if warm_start is not None and warm_start.velocities.shape == (N, 3):
@@ -266,154 +224,32 @@ class Planner:
             # deterministically, as the rules of the air do (pass right).
             route = request.target - request.position
             v = np.broadcast_to(route / (N * tau), (N, 3)) + _right_bulge_velocities(route, N, tau)
-        # project onto |V_i| <= v_max and |V_i - V_{i-1}| <= a_max tau (forward pass)
-        vmax, da = cfg.velocity_max, cfg.accel_max * tau
-        out = np.empty((N, 3))
-        prev = v0
-        for i in range(N):
-            prev = np.clip(np.clip(v[i], prev - da, prev + da), -vmax, vmax)
-            out[i] = prev
-        return out
+        # project onto |V_i| <= v_max and |V_i - V_{i-1}| <= a_max tau (forward pass; a
+        # sequential recursion, so in Python floats: the same IEEE operations as np.clip
+        # without an array call per step and axis)
+        vmax, da = cfg.velocity_max.tolist(), (cfg.accel_max * tau).tolist()
+        rows = np.asarray(v, dtype=float).tolist()
+        prev = np.asarray(v0, dtype=float).tolist()
+        for row in rows:
+            for k in range(3):
+                x = min(max(row[k], prev[k] - da[k]), prev[k] + da[k])
+                prev[k] = row[k] = min(max(x, -vmax[k]), vmax[k])
+        return np.array(rows)
 
-    def _initial_lam(self, request: PlanRequest, positions: np.ndarray) -> np.ndarray:
-        if request.num_obstacles == 0:
-            return np.zeros((0, request.horizon_steps))
-        mu1 = F._nudge(positions, request.obstacle_means)
-        res = overlap.minmax(mu1, np.broadcast_to(request.drone_covs[None], request.obstacle_covs.shape),
-                             request.obstacle_means, request.obstacle_covs)
-        return np.clip(res.lam, F.LAM_EPS, 1.0 - F.LAM_EPS)
-
-    def _qp_step(self, layout: QpLayout, data: RequestData, request: PlanRequest, v_bar: np.ndarray,
-                 p_bar: np.ndarray, lam_bar: np.ndarray | None, *, first: bool) -> QpStep:
-        cfg = self.config
-        N, P = layout.N, layout.P
-        if lam_bar is not None:
-            lam_bar = np.clip(lam_bar, F.LAM_EPS, 1.0 - F.LAM_EPS)     # OSQP meets the box only to tolerance
-        rows = self.linearise(request, p_bar, lam_bar, data.in_range)
-        a_slot = data.a_slot
-        a_slot[layout.slot["obs_p"].slice] = rows.coef_p.ravel()
-        l, u = data.l, data.u
-        l[layout.row["obs"].slice], u[layout.row["obs"].slice] = rows.lower.ravel(), np.inf
-        if layout.upper:
-            a_slot[layout.slot["obs_hi_p"].slice] = rows.coef_p.ravel()
-            upper = np.where(data.upper_active[:, None], rows.upper, np.inf)  # c_max released where masked
-            l[layout.row["obs_hi"].slice], u[layout.row["obs_hi"].slice] = -np.inf, upper.ravel()
-        # velocity box ∩ trust region around the iterate
-        vmax, tr = cfg.velocity_max, cfg.trust_region_mps
-        v_lo, v_hi = np.maximum(-vmax, v_bar - tr), np.minimum(vmax, v_bar + tr)
-        l[layout.row["vbox"].slice], u[layout.row["vbox"].slice] = v_lo.ravel(), v_hi.ravel()
-        lam_lo = lam_hi = np.zeros((P, 0))
-        if layout.paper:
-            a_slot[layout.slot["obs_lam"].slice] = rows.coef_lam.ravel()
-            if layout.upper:
-                a_slot[layout.slot["obs_hi_lam"].slice] = rows.coef_lam.ravel()
-            a_slot[layout.slot["adm_p"].slice] = rows.adm_p.ravel()
-            a_slot[layout.slot["adm_lam"].slice] = rows.adm_lam.ravel()
-            l[layout.row["adm"].slice] = u[layout.row["adm"].slice] = rows.adm_rhs.ravel()
-            lam_lo = np.maximum(F.LAM_EPS, lam_bar - cfg.trust_region_lam)
-            lam_hi = np.minimum(1.0 - F.LAM_EPS, lam_bar + cfg.trust_region_lam)
-            l[layout.row["lambox"].slice], u[layout.row["lambox"].slice] = lam_lo.ravel(), lam_hi.ravel()
-        a_data = layout.a_csc_data(a_slot)
-        key = (N, P, layout.W)
-        qp = self._qps[key][1]
-        # Hard first: safety slacks pinned to 0 (rows "0 <= s <= 0", no penalty in q). With
-        # the L1 penalty in place every "s >= 0" row carries a dual equal to the penalty,
-        # which OSQP needs hundreds to thousands of iterations to settle (measured); pinned,
-        # they are equality rows it handles at once. Only if the hard QP is infeasible is it
-        # solved again with the slacks free and penalised. The c_max slack stays free and
-        # penalised in the hard QP too: c_max is a performance bound, and an unreachable
-        # one (the leader still far ahead) must not make the safety rows soft. Pinned, it
-        # did: the corridor run then traded wall and c_min slack against the terminal cost
-        # and touched a wall (measured).
-        slack_rows = layout.row["slack"].slice
-        u[slack_rows] = np.inf
-        u[layout.row["slack"].start + layout.safety_slacks] = 0.0
-        if qp is None:
-            qp = OsqpQp(layout, data.p_data, data.q_hard, a_data, l, u, eps=cfg.solver_eps, eps_rel=cfg.solver_eps_rel,
-                        polish=cfg.solver_polish, rho=cfg.solver_rho)
-            self._qps[key] = (layout, qp)
-        else:
-            qp.update(p_data=data.p_data if first else None, q=data.q_hard, a_data=a_data, l=l, u=u)
-        # primal start at the linearisation point (slacks 0)
-        x0 = np.zeros(layout.n)
-        x0[layout.col["V"].slice] = v_bar.ravel()
-        x0[layout.col["p"].slice] = p_bar.ravel()
-        if layout.paper:
-            x0[layout.col["lam"].slice] = lam_bar.ravel()
-        if first:
-            # duals of the previous replan shifted by one step like the primal; a cold start
-            # starts them at zero, so that its plan does not depend on what was solved before
-            qp.warm_start(x=x0, y=data.y_warm if data.y_warm is not None else np.zeros(layout.m))
-        sol = qp.solve(max_iter=cfg.solver_max_iter)
-        if not sol.accurate:
-            hard_status = sol.status
-            sol = self._least_violation(qp, layout, data, x0, l, u)
-            logger.debug("hard QP %s; soft QP %s", hard_status, sol.status)
-        x = sol.x
-        # cost at the solution with slacks clipped at 0: OSQP meets "s >= 0" only to its
-        # tolerance, and a slightly negative slack times the large penalty would bias J
-        xc = x.copy()
-        xc[layout.slack_cols] = np.maximum(xc[layout.slack_cols], 0.0)
-        objective = 0.5 * float(xc @ (qp.p_full @ xc)) + float(data.q @ xc) + data.constant
-        penalty = float(data.q[layout.slack_cols] @ xc[layout.slack_cols])
-        col = layout.col
-        vel = x[col["V"].slice].reshape(N, 3)
-        pos = x[col["p"].slice].reshape(N, 3)
-        lam = x[col["lam"].slice].reshape(P, N) if layout.paper else np.zeros((P, N))
-        sig = layout.slack_scale
-        s_hi = sig * x[col["s_hi"].slice].reshape(P, N) if layout.upper else np.zeros((P, N))
-        return QpStep(
-            velocities=vel, positions=pos, lam=lam,
-            slack_obstacle=sig * x[col["s_lo"].slice].reshape(P, N), slack_upper=s_hi,
-            slack_wall=sig * x[col["s_wall"].slice].reshape(layout.W, N),
-            objective=objective, cost=objective - penalty, rows=rows,
-            velocity_lower=v_lo, velocity_upper=v_hi, lam_lower=lam_lo, lam_upper=lam_hi,
-            wall_upper=data.wall_upper, v0=data.v0, solution=sol,
-        )
-
-    def _least_violation(self, qp: OsqpQp, layout: QpLayout, data: RequestData, x0: np.ndarray,
-                         l: np.ndarray, u: np.ndarray) -> QpSolution:
-        """The QP when its safety rows cannot all hold: violate them as little as possible.
-
-        An L1 penalty is exact only above the constraint's multiplier, and here the
-        multiplier is the cost's pull (the terminal Mahalanobis term several metres from
-        the goal is worth more per metre than ``slack_penalty``): one soft QP gave up far
-        more safety than the situation forced (measured: 4x the least total slack in the
-        cvxpy cross-check, and planned contours of 0.07 against c_min = 0.30 in the
-        corridor). So, lexicographically: (1) the least total safety slack, with a small
-        proximal term ``LEAST_VIOLATION_PROX |V - V_bar|^2`` in place of the cost so that
-        the QP is strongly convex in the velocities; (2) the real cost with each safety
-        slack capped at what (1) needed.
-        """
-        slack_rows = layout.row["slack"]
-        safety = slack_rows.start + layout.safety_slacks
-        u[slack_rows.slice] = np.inf
-        v_bar = x0[layout.col["V"].slice]
-        q_least = np.zeros(layout.n)
-        q_least[layout.col["V"].slice] = -2.0 * LEAST_VIOLATION_PROX * v_bar
-        q_least[layout.slack_cols[layout.safety_slacks]] = layout.slack_scale
-        p_least = layout.p_data(0.0, 2.0 * LEAST_VIOLATION_PROX, np.zeros((3, 3)))
-        qp.update(p_data=p_least, q=q_least, l=l, u=u)     # l and u together: OSQP 1.1 checks l <= u
-        # The duals of an infeasible or unconverged hard solve are no start (they made OSQP
-        # hit its iteration cap in closed loop with `paper`, measured): restart them at zero.
-        qp.warm_start(x=x0, y=np.zeros(layout.m))
-        least = qp.solve(max_iter=self.config.solver_max_iter)
-        qp.update(p_data=data.p_data, q=data.q)
-        if np.all(np.isfinite(least.x)):     # an unconverged (1) still bounds the slack it needs
-            needed = np.maximum(least.x[layout.slack_cols[layout.safety_slacks]], 0.0)
-            cap = np.where(needed > SLACK_TOL, needed + LEAST_VIOLATION_MARGIN, 0.0)   # unneeded: pinned
-            u[safety] = cap / layout.slack_scale
-            qp.update(l=l, u=u)
-            qp.warm_start(x=least.x, y=np.zeros(layout.m))
-            sol = qp.solve(max_iter=self.config.solver_max_iter)
-            if sol.usable:
-                return sol
-            if least.usable:     # (1) is a plan too: least violation, cost not minimised
-                return least
-        u[slack_rows.slice] = np.inf
-        qp.update(l=l, u=u)
-        qp.warm_start(x=x0, y=np.zeros(layout.m))
-        return qp.solve()                     # the plain soft QP: a plan, and its slack says so
+    # ------------------------------------------------------------------ internals
+    def _workspace(self, request: PlanRequest) -> QpWorkspace:
+        if not isinstance(request, PlanRequest):
+            raise TypeError(f"request must be a PlanRequest, got {type(request).__name__}")
+        if request.horizon_steps != self.config.horizon_steps:
+            raise InputError(f"request has {request.horizon_steps} steps, the planner is configured "
+                             f"for horizon_steps = {self.config.horizon_steps}")
+        key = (request.horizon_steps, request.num_obstacles, request.num_walls)
+        if key not in self._workspaces:
+            layout = QpLayout(*key, paper=self.formulation.carries_lam, upper=self.formulation.has_upper,
+                              step_s=self.config.step_s, lag=self.lag)
+            self._workspaces[key] = QpWorkspace(layout)
+            logger.debug("planner: new QP shape N=%d P=%d W=%d (n=%d, m=%d)", *key, layout.n, layout.m)
+        return self._workspaces[key]
 
     @staticmethod
     def _safety_slack(data: RequestData, step: QpStep) -> float:
@@ -421,24 +257,8 @@ class Planner:
         slack = [step.slack_obstacle[data.in_range].ravel(), step.slack_wall.ravel()]
         return float(max((float(s.max()) for s in slack if s.size), default=0.0))
 
-    def _recheck(self, request: PlanRequest, data: RequestData, positions: np.ndarray) -> tuple[SafetyFigures, bool]:
-        """Exact figures and whether the formulation's own constraints hold on them."""
-        cfg = self.config
-        deterministic = cfg.formulation == "deterministic"
-        figs = exact_safety(request, positions, cfg.drone_radius_m, 0.0 if deterministic else self.r_min)
-        ok = bool(np.all(figs.wall_margin >= -RECHECK_TOL_M))
-        m = data.in_range
-        if deterministic:
-            ok &= bool(np.all(figs.distance_margin[m] >= -RECHECK_TOL_M))
-        elif cfg.formulation == "bhattacharyya":
-            margin = bhattacharyya_margin(request, positions, cfg.drone_radius_m, 0.5 * self.r_min**2)
-            ok &= bool(np.all(margin[m] >= -self.r_min * RECHECK_TOL_SIGMA))
-        else:
-            ok &= bool(np.all(figs.eta[m] >= self.r_min - RECHECK_TOL_SIGMA))
-        return figs, ok
-
     def _finish(self, request: PlanRequest, data: RequestData, step: QpStep | None, v_bar: np.ndarray,
-                iterations: int, notes: list[str], t0: float) -> Plan:
+                v_start: np.ndarray, iterations: int, budget: WorkBudget, notes: list[str], t0: float) -> Plan:
         cfg = self.config
         if step is None:
             velocities = v_bar
@@ -451,10 +271,26 @@ class Planner:
             upper = float(step.slack_upper[data.upper_active].max(initial=0.0))
             if upper > C_MAX_SLACK_TOL:
                 notes.append(f"c_max_violated: slack {upper:.3g}")
-        figs, ok = self._recheck(request, data, positions)
+        figs, ok = self.formulation.recheck(request, positions, data.in_range)
+        # Out of budget with an unsafe last solution: a least-violation solution (it carries
+        # the slack the situation forced) is flown as a slack plan, as without a budget
+        # (braking instead in the corridor with c_max: 6 of 8 seeds collided, measured);
+        # anything else falls back to the SCP's start if that is safe, else fails.
+        if budget.exhausted and not ok and step is not None and slack_max <= SLACK_TOL:
+            # the best safe iterate: the last QP's solution was not; the SCP's start (the
+            # previous plan shifted, within the speed and acceleration bounds) may be
+            start = self.lag.positions(request.position, data.v0, v_start)
+            figs_start, ok = self.formulation.recheck(request, start, data.in_range)
+            if ok:
+                velocities, positions, figs = v_start.copy(), start, figs_start
+                slack_max, cost = 0.0, np.nan
+                notes.append("work_budget: returned the SCP's starting iterate (safe)")
         # the status comes from the exact figures: slack that only ate into the back-off
         # (formulations.BACKOFF_SIGMA) leaves c_min and the walls holding
-        if step is None:
+        if step is None and budget.exhausted and ok:
+            status = "optimal"
+            notes.append("work_budget: returned the SCP's starting iterate (safe)")
+        elif step is None:
             status = "failed"
         elif ok:
             status = "optimal"
@@ -464,7 +300,8 @@ class Planner:
             status = "slack"
         else:
             status = "failed"
-            notes.append("exact recheck violated c_min without slack")
+            notes.append("work_budget: no safe iterate" if budget.exhausted
+                         else "exact recheck violated c_min without slack")
         # the cmd rows hold |u| <= v_max to OSQP's tolerance, which 1/(1 - alpha) amplifies
         # (1.5e-4 m/s over, measured): clip so that no setpoint ever exceeds the bound
         commands = np.clip(self.lag.commands(data.v0, velocities), -cfg.velocity_max, cfg.velocity_max)
@@ -474,7 +311,7 @@ class Planner:
             velocities=velocities, commands=commands, initial_velocity=data.v0.copy(), positions=positions, eta=figs.eta, contour_of_touch=figs.contour_of_touch,
             overlap=figs.overlap, wall_margin=figs.wall_margin, in_range=data.in_range.copy(), status=status,
             iterations=iterations, solve_time_s=time.perf_counter() - t0, slack_max=slack_max, cost=cost,
-            formulation=cfg.formulation, notes=tuple(notes),
+            formulation=cfg.formulation, notes=tuple(notes), work=budget.used, admm_iterations=budget.admm_iterations,
         )
         if status != "optimal":
             logger.info("plan %s after %d iterations (slack %.3g; %s)", status, iterations, slack_max, "; ".join(notes))

@@ -1,0 +1,107 @@
+"""What the control loop records: its modes, the planner's statuses and one record per applied replan.
+
+Typed so that reports, figures and the replay compare enum members rather than strings.
+Both enums are :class:`enum.StrEnum`: a member equals its value (``PlanStatus.FAILED ==
+"failed"``) and serialises to it in JSON, so summaries keep their wire form.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+from collections import Counter
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+
+class LoopMode(enum.StrEnum):
+    """What the loop is doing at a tick.
+
+    ``WAITING`` no stream yet; ``PRESTREAM`` streaming hover while PX4 is asked for
+    OFFBOARD; ``TRACKING`` flying a plan; ``BRAKING`` decelerating within the
+    acceleration bound (no valid plan, plan exhausted or older than ``max_plan_age_s``);
+    ``STALE`` braking because the drone estimate is stale; ``IDLE`` not commanding
+    (the sequence stopped streaming).
+    """
+
+    WAITING = "waiting"
+    PRESTREAM = "prestream"
+    TRACKING = "tracking"
+    BRAKING = "braking"
+    STALE = "stale"
+    IDLE = "idle"
+
+
+class PlanStatus(enum.StrEnum):
+    """Outcome of one replan, as :class:`companion.core.planner.Plan` reports it."""
+
+    OPTIMAL = "optimal"
+    SLACK = "slack"
+    FAILED = "failed"
+
+    @classmethod
+    def of(cls, plan: object) -> "PlanStatus":
+        """The status of a :class:`~companion.core.planner.Plan` (its ``status`` string or enum)."""
+        return cls(str(getattr(plan, "status")))
+
+
+def status_counts(statuses: Iterable[PlanStatus | str]) -> dict[str, int]:
+    """Replans per status, as plain strings in :class:`PlanStatus` order (statuses never seen omitted)."""
+    counts = Counter(PlanStatus(s) for s in statuses)
+    return {s.value: counts[s] for s in PlanStatus if counts[s]}
+
+
+@dataclass(frozen=True)
+class ReplanRecord:
+    """One replan, recorded when its plan was applied (for summaries, figures and replay).
+
+    Positions and covariances are NED metres / square metres at vehicle time
+    ``t_vehicle_s`` (the request's). ``t_link_s`` is the link time of the request;
+    ``t_applied_s`` the link time at which the loop adopted (or rejected) the plan: the
+    same tick in lockstep, later in real time. ``realised_contour`` is the contour of
+    touch between the drone's estimate and each tracked obstacle's estimate at the
+    request (physical radii included), keyed by track. ``tracks_unconstrained`` counts
+    tracks in the request that the planner was not asked to avoid (over the
+    ``max_constrained_tracks`` limit, see :mod:`companion.loop.track_selection`).
+    """
+
+    t_link_s: float
+    t_vehicle_s: float
+    status: PlanStatus
+    iterations: int
+    solve_time_s: float
+    slack_max: float
+    planned_min_contour: float
+    realised_contour: dict
+    drone_position: np.ndarray
+    drone_cov: np.ndarray
+    drone_velocity: np.ndarray
+    obstacle_positions: dict
+    obstacle_covs: dict
+    target: np.ndarray
+    plan_positions: np.ndarray
+    command: np.ndarray
+    t_applied_s: float = 0.0
+    tracks_unconstrained: int = 0
+
+
+@dataclass
+class CompanionState:
+    """Counters and the current mode of the loop, for tests and the summary."""
+
+    mode: LoopMode = LoopMode.WAITING
+    goal_reached_t_s: float | None = None
+    braking_events: int = 0
+    stale_events: int = 0
+    failed_plans: int = 0
+    slack_plans: int = 0
+    old_plan_events: int = 0
+    obstacle_rejections: int = 0
+    drone_rejections: int = 0
+    messages_rejected: int = 0
+    tracks_unconstrained_max: int = 0
+    events: list = field(default_factory=list)

@@ -1,0 +1,282 @@
+"""From estimates, mission and map to one planning problem (:class:`ReplanJob`).
+
+Covariance policy for the drone, obstacle prediction over the horizon, the static map,
+waypoint routing along the straight route and the choice of the obstacle the ``c_max``
+upper bound follows. The job also carries what the loop records about the request (the
+estimates it was built from, the realised contour of touch), so a plan that comes back
+later (real time) is recorded against the state it was planned from.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.core.overlap import contour_of_touch
+from companion.core.planner import Plan, PlanRequest
+from companion.loop.config import CompanionScenario
+from companion.loop.perception import Perception
+from companion.loop.track_selection import choose, confidence_radius, rank_by_risk
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class ReplanJob:
+    """One replan asked of the planner, with the context the loop records beside its answer.
+
+    Attributes
+    ----------
+    seq : int
+        Replan number (0, 1, ...) of this companion.
+    t_link_s, t_vehicle_s : float
+        Link time of the request and the vehicle time the plan starts from (s).
+    request : PlanRequest
+        The problem.
+    warm_start : Plan or None
+        The plan in force when the request was built.
+    position, drone_cov, drone_velocity, target : ndarray
+        Drone position estimate extrapolated to ``t_vehicle_s`` (NED m), its planning
+        covariance now (m^2), its velocity estimate (m/s) and the waypoint (NED m).
+    obstacle_positions, obstacle_covs : dict
+        Every track's estimate at ``t_vehicle_s`` (NED m, m^2), keyed by track.
+    realised_contour : dict
+        Contour of touch between the drone's and each track's estimate now, keyed by track.
+    tracks_unconstrained : tuple
+        Tracks left out of ``request`` (over the constrained-track limit).
+    """
+
+    seq: int
+    t_link_s: float
+    t_vehicle_s: float
+    request: PlanRequest
+    warm_start: Plan | None
+    position: np.ndarray
+    drone_cov: np.ndarray
+    drone_velocity: np.ndarray
+    target: np.ndarray
+    obstacle_positions: dict
+    obstacle_covs: dict
+    realised_contour: dict
+    tracks_unconstrained: tuple = ()
+
+
+class RequestBuilder:
+    """Builds :class:`ReplanJob` s for one scenario (mission, map, planner and loop settings).
+
+    Holds one piece of state: where the route starts (the drone's position when the
+    companion first planned), from which waypoints are placed toward the goal.
+
+    Parameters
+    ----------
+    scenario : CompanionScenario
+        Mission, map, planner and loop settings.
+    obstacle_radius : callable (track key) -> float, optional
+        Body radius of a tracked obstacle, m (e.g. from its traffic reports, see
+        :meth:`companion.loop.obstacles.ObstacleIntake.radius`); default: every track
+        has ``[companion] obstacle_radius_m``.
+    """
+
+    def __init__(self, scenario: CompanionScenario,
+                 obstacle_radius: Callable[[Hashable], float] | None = None) -> None:
+        self.scenario = scenario
+        self.cfg = scenario.planner
+        self.loop = scenario.loop
+        default_radius_m = scenario.loop.obstacle_radius_m
+        self.obstacle_radius: Callable[[Hashable], float] = obstacle_radius or (lambda key: default_radius_m)
+        self.route_start: np.ndarray | None = None
+        self._sigmas = confidence_radius(self.cfg.c_min)
+
+    # ------------------------------------------------------------------ mission
+
+    def start_route(self, position: np.ndarray) -> None:
+        """Fix the route's start at the first call (NED m); later calls do nothing."""
+        if self.route_start is None:
+            self.route_start = np.asarray(position, dtype=float).copy()
+
+    def at_goal(self, position: np.ndarray) -> bool:
+        """Whether ``position`` (NED m) is within the mission's goal tolerance."""
+        mission = self.scenario.mission
+        return bool(np.linalg.norm(position - mission.goal) <= mission.goal_tolerance_m)
+
+    def target(self, position: np.ndarray) -> np.ndarray:
+        """Intermediate waypoint on the straight route from where the companion took over to the goal."""
+        goal = self.scenario.mission.goal
+        start = self.route_start if self.route_start is not None else position
+        route = goal - start
+        length = float(np.linalg.norm(route))
+        if length < 1e-9:
+            return goal.copy()
+        along = float(np.dot(position - start, route) / length)
+        s = min(length, max(0.0, along) + self.scenario.mission.waypoint_spacing_m)
+        return start + route * (s / length)
+
+    def leads_the_way(self, position: np.ndarray, obstacle: np.ndarray) -> bool:
+        """Whether an obstacle is between the drone and its goal along the line to the goal.
+
+        The ``c_max`` upper bound (keep the ``c_max`` contours touching) is meant for
+        following an obstacle that leads the way through a tight space; it is released
+        once that obstacle is behind the drone or past the goal, so the drone stops at
+        its goal instead of being dragged along.
+        """
+        to_goal = self.scenario.mission.goal - position
+        length = float(np.linalg.norm(to_goal))
+        if length < 1e-9:
+            return False
+        along = float(np.dot(obstacle - position, to_goal) / length)
+        return 0.0 < along < length
+
+    # ------------------------------------------------------------------ estimates
+
+    def drone_covariances(self, perception: Perception, t_v: float) -> tuple[np.ndarray, np.ndarray]:
+        """The drone's planning covariance now (3, 3) and over the horizon (N, 3, 3), m^2.
+
+        ``[companion] drone_covariance`` picks the source (see :class:`~companion.loop.config.LoopConfig`);
+        ``drone_cov_floor_m2`` is added to both.
+        """
+        n, tau = self.cfg.horizon_steps, self.cfg.step_s
+        floor = self.loop.drone_cov_floor_m2 * np.eye(3)
+        est = perception.drone.state
+        if self.loop.drone_covariance == "reported" and perception.reported_cov is not None:
+            cov_now = perception.reported_cov + floor
+        else:
+            cov_now = est.position_cov + floor
+        if self.loop.drone_covariance == "predicted":
+            covs = perception.drone.predict_position_covariances(t_v, np.zeros((n, 3)), tau) + floor
+        else:
+            covs = np.broadcast_to(cov_now, (n, 3, 3)).copy()
+        return cov_now, covs
+
+    def build(
+        self,
+        *,
+        seq: int,
+        t_s: float,
+        t_v: float,
+        perception: Perception,
+        initial_velocity: np.ndarray,
+        warm_start: Plan | None,
+    ) -> ReplanJob:
+        """The planning problem at link time ``t_s`` / vehicle time ``t_v`` from the current estimates.
+
+        ``initial_velocity`` is ``V_0`` (NED m/s, see :meth:`companion.loop.executor.Executor.initial_velocity`).
+        Tracks silent for longer than the tracker's ``drop_after_s`` are pruned first.
+        """
+        est = perception.drone.state
+        n, tau = self.cfg.horizon_steps, self.cfg.step_s
+        position = est.position + est.velocity * max(0.0, t_v - est.t_s)
+        cov_now, drone_covs = self.drone_covariances(perception, t_v)
+
+        tracker = perception.tracker
+        tracker.prune(t_v)
+        times = t_v + tau * np.arange(1, n + 1)
+        keys = list(tracker.keys())
+        constrained, left_out = self._select(keys, perception, t_v, position, initial_velocity, cov_now)
+        now_left_out = self._estimates_now(left_out, perception, t_v)
+        means, covs, radii, now_pos, now_cov = [], [], [], {}, {}
+        for key in constrained:
+            m, c = tracker.predict(key, times)
+            m0, c0 = tracker.predict(key, np.array([t_v]))
+            means.append(m)
+            covs.append(c)
+            radii.append(self.obstacle_radius(key))
+            now_pos[key], now_cov[key] = m0[0], c0[0]
+        for key, (m0, c0) in now_left_out.items():
+            now_pos[key], now_cov[key] = m0, c0
+        for s in self.scenario.static_obstacles:
+            means.append(np.broadcast_to(s.center, (n, 3)))
+            covs.append(np.broadcast_to(s.covariance, (n, 3, 3)))
+            radii.append(s.radius)
+        target = self.target(position)
+        leading = [self.leads_the_way(position, now_pos[k]) for k in constrained] + [False] * len(self.scenario.static_obstacles)
+        request = PlanRequest(
+            position=position,
+            velocity=initial_velocity,
+            drone_covs=drone_covs,
+            target=target,
+            obstacle_means=np.array(means).reshape(-1, n, 3),
+            obstacle_covs=np.array(covs).reshape(-1, n, 3, 3),
+            obstacle_radii=np.array(radii, dtype=float),
+            walls_normal=self.scenario.walls_normal,
+            walls_offset=self.scenario.walls_offset,
+            upper_bound_mask=np.array(leading, dtype=bool),
+        )
+        return ReplanJob(
+            seq=seq,
+            t_link_s=t_s,
+            t_vehicle_s=t_v,
+            request=request,
+            warm_start=warm_start,
+            position=position,
+            drone_cov=cov_now,
+            drone_velocity=est.velocity.copy(),
+            target=target,
+            obstacle_positions=now_pos,
+            obstacle_covs=now_cov,
+            realised_contour=self._realised_contour(position, cov_now, keys, now_pos, now_cov),
+            tracks_unconstrained=tuple(left_out),
+        )
+
+    # ------------------------------------------------------------------ many tracks
+
+    def _select(self, keys: list, perception: Perception, t_v: float, position, velocity, cov_now) -> tuple[list, list]:
+        """The tracks to constrain (tracker order) and those left out (riskiest first), see :mod:`~companion.loop.track_selection`.
+
+        With no more tracks than ``max_constrained_tracks`` every track is constrained and
+        nothing is ranked. Otherwise the ranking propagates every track's mean and
+        covariance (without process noise: a ranking, not a prediction) from its last
+        estimate in one vectorised step, so 200 tracks cost about as much as a few.
+        """
+        limit = self.loop.max_constrained_tracks
+        if len(keys) <= limit:
+            return keys, []
+        n, tau = self.cfg.horizon_steps, self.cfg.step_s
+        states = [perception.tracker.state(k) for k in keys]
+        mean = np.array([s.mean for s in states])           # (P, 6)
+        cov = np.array([s.cov for s in states])             # (P, 6, 6)
+        lag0 = np.maximum(t_v - np.array([s.t_s for s in states]), 0.0)
+        steps = tau * np.arange(0, n + 1)
+        lags = lag0[:, None] + steps[None, :]               # (P, N+1)
+        track_means = mean[:, None, :3] + lags[..., None] * mean[:, None, 3:]
+        tr_pp = np.trace(cov[:, :3, :3], axis1=1, axis2=2)
+        tr_pv = np.trace(cov[:, :3, 3:], axis1=1, axis2=2)
+        tr_vv = np.trace(cov[:, 3:, 3:], axis1=1, axis2=2)
+        track_var = tr_pp[:, None] + 2.0 * lags * tr_pv[:, None] + lags**2 * tr_vv[:, None]  # trace >= largest eigenvalue
+        drone_path = position[None, :] + steps[:, None] * np.asarray(velocity)[None, :]
+        order, _, _ = rank_by_risk(
+            drone_path, track_means, track_var, float(np.trace(cov_now)),
+            self.cfg.drone_radius_m + np.array([[self.obstacle_radius(k)] for k in keys]), tau, self._sigmas,
+        )
+        chosen, rest = choose(order, limit)
+        return [keys[i] for i in chosen], [keys[i] for i in rest]
+
+    @staticmethod
+    def _estimates_now(keys: list, perception: Perception, t_v: float) -> dict:
+        """Position mean (NED m) and covariance (m^2) at ``t_v`` of tracks the planner does not get.
+
+        Propagated from each track's estimate without process noise (the tracker's full
+        prediction costs about 0.2 ms a track, too much for 200 tracks in one tick).
+        """
+        out = {}
+        for key in keys:
+            state = perception.tracker.state(key)
+            lag = max(t_v - state.t_s, 0.0)
+            f = np.hstack([np.eye(3), lag * np.eye(3)])  # (3, 6): position after lag
+            out[key] = (f @ state.mean, f @ state.cov @ f.T)
+        return out
+
+    def _realised_contour(self, position, cov_now, keys, now_pos, now_cov) -> dict:
+        """Contour of touch between the drone's estimate and each track's, keyed by track."""
+        if not keys:
+            return {}
+        ct = contour_of_touch(
+            np.broadcast_to(position, (len(keys), 3)),
+            np.broadcast_to(cov_now, (len(keys), 3, 3)),
+            np.array([now_pos[k] for k in keys]),
+            np.array([now_cov[k] for k in keys]),
+            self.cfg.drone_radius_m + np.array([self.obstacle_radius(k) for k in keys]),
+        )
+        return {k: float(v) for k, v in zip(keys, np.atleast_1d(ct))}

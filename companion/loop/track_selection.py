@@ -1,0 +1,94 @@
+"""Which tracks the planner constrains when more are in range than it can afford: the risk order.
+
+The planner's work grows with the number of obstacle rows it carries, so a replan
+constrains at most ``[companion] max_constrained_tracks`` tracks (static map obstacles
+always count in full and are not part of the limit). The tracks are ranked by risk,
+riskiest first:
+
+1. the smallest *predicted clearance* over the horizon: the distance between the
+   drone's nominal path and the track's predicted mean at steps 0..N (now included),
+   minus both bodies' radii, minus the ``c_min`` confidence radius of the two
+   position uncertainties along the line between them (``sqrt(chi2_3.ppf(c_min))``
+   standard deviations of the summed covariance's largest eigenvalue), in metres;
+2. then the earlier *time of that closest approach* (s after the request);
+3. then the track's creation order (deterministic).
+
+The drone's nominal path is the straight line from its position at ``V_0`` (the
+velocity the next plan starts from) for the horizon: the same kind of open-loop guess
+the tracker makes of the obstacles. A track that is far and slow ranks last; one that
+is close now or closing fast ranks first. The tracks left out are counted in the
+job (``ReplanJob.tracks_unconstrained``), in the summary and in a rate-limited
+STATUSTEXT; they are still tracked, predicted and included in the realised contour of
+touch, and are constrained as soon as they rank among the riskiest.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+from scipy.stats import chi2
+
+logger = logging.getLogger(__name__)
+
+
+def confidence_radius(c_min: float) -> float:
+    """Standard deviations of a 3-D Gaussian's ``c_min`` confidence ellipsoid along its longest axis."""
+    return float(math.sqrt(chi2.ppf(c_min, 3)))
+
+
+def rank_by_risk(
+    drone_path: np.ndarray,
+    track_means: np.ndarray,
+    track_cov_max_eig: np.ndarray,
+    drone_cov_max_eig: float,
+    radius_sum: float | np.ndarray,
+    step_s: float,
+    sigmas: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Indices of the tracks, riskiest first, with each track's predicted clearance and its time.
+
+    Parameters
+    ----------
+    drone_path : (N+1, 3) array
+        The drone's nominal positions at steps 0..N, NED m.
+    track_means : (P, N+1, 3) array
+        Each track's predicted mean at the same steps, NED m.
+    track_cov_max_eig : (P, N+1) array
+        Largest eigenvalue (an upper bound is fine) of each track's predicted position covariance, m^2.
+    drone_cov_max_eig : float
+        The same for the drone's planning covariance, m^2.
+    radius_sum : float or (P, 1) array
+        Drone radius plus obstacle radius (one per track when they differ), m.
+    step_s : float
+        Seconds per step.
+    sigmas : float
+        Confidence radius in standard deviations (:func:`confidence_radius`).
+
+    Returns
+    -------
+    order : (P,) int array
+        Track indices, riskiest first.
+    clearance_m : (P,) array
+        Smallest predicted clearance over the steps, m (negative: the confidence regions overlap).
+    t_closest_s : (P,) array
+        Seconds after the request of that smallest clearance.
+    """
+    p = track_means.shape[0]
+    if p == 0:
+        return np.zeros(0, dtype=int), np.zeros(0), np.zeros(0)
+    distance = np.linalg.norm(track_means - drone_path[None, :, :], axis=2)
+    spread = sigmas * np.sqrt(np.maximum(track_cov_max_eig, 0.0) + max(drone_cov_max_eig, 0.0))
+    clearance = distance - radius_sum - spread
+    step = np.argmin(clearance, axis=1)
+    best = clearance[np.arange(p), step]
+    t_closest = step * step_s
+    order = np.lexsort((np.arange(p), t_closest, best))  # last key is primary
+    return order, best, t_closest
+
+
+def choose(order: np.ndarray, limit: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``limit`` riskiest indices in their original order, and the rest (riskiest first)."""
+    chosen = np.sort(order[:limit])
+    return chosen, order[limit:]

@@ -1,0 +1,59 @@
+"""The executor: the plan's command for the current time, braking within the acceleration bound."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from companion.core.planner import Planner, PlannerConfig
+from companion.loop.executor import Executor, Follow
+
+
+class _Plan:
+    """Just what the executor reads of a plan."""
+
+    def __init__(self, commands):
+        self.commands = np.asarray(commands, dtype=float)
+        self.initial_velocity = np.zeros(3)
+
+
+def _executor(max_age=1.0):
+    cfg = PlannerConfig(horizon_steps=4, step_s=0.3, accel_max_mps2=(0.5, 0.5, 0.5))
+    return Executor(cfg, 0.05, Planner(cfg).lag, max_plan_age_s=max_age), cfg
+
+
+def test_that_the_command_is_the_plans_step_for_the_current_vehicle_time():
+    ex, _ = _executor()
+    ex.adopt(_Plan([[1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0]]), t_vehicle_s=10.0, t_link_s=100.0)
+    assert ex.follow(100.0, 10.0)[0].tolist() == [1, 0, 0]
+    assert ex.follow(100.35, 10.35)[0].tolist() == [2, 0, 0]
+    assert ex.follow(100.9, 10.9)[0].tolist() == [4, 0, 0]
+
+
+def test_that_an_exhausted_plan_brakes_within_the_acceleration_bound():
+    ex, cfg = _executor(max_age=100.0)
+    ex.adopt(_Plan([[2, -1, 0.1]] * 4), t_vehicle_s=0.0, t_link_s=0.0)
+    first, why = ex.follow(0.0, 0.0)
+    assert why is Follow.PLAN
+    previous = first.copy()
+    for i in range(1, 200):
+        cmd, why = ex.follow(1.2 + 0.05 * i, 1.2 + 0.05 * i)
+        assert why is Follow.EXHAUSTED
+        assert np.all(np.abs(cmd - previous) <= np.asarray(cfg.accel_max) * 0.05 + 1e-12)
+        assert np.all(np.abs(cmd) <= np.abs(previous))
+        previous = cmd.copy()
+    assert np.all(previous == 0.0)
+
+
+def test_that_a_plan_older_than_the_configured_age_is_not_followed():
+    ex, _ = _executor(max_age=0.5)
+    ex.adopt(_Plan([[1, 0, 0]] * 4), t_vehicle_s=0.0, t_link_s=0.0)
+    assert ex.follow(0.5, 0.5)[1] is Follow.PLAN
+    cmd, why = ex.follow(0.55, 0.55)
+    assert why is Follow.TOO_OLD and cmd[0] < 1.0
+
+
+def test_that_without_a_plan_the_executor_brakes():
+    ex, _ = _executor()
+    ex.command = np.array([1.0, 0.0, 0.0])
+    cmd, why = ex.follow(0.0, 0.0)
+    assert why is Follow.NO_PLAN and cmd[0] == 1.0 - 0.5 * 0.05

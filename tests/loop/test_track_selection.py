@@ -1,0 +1,103 @@
+"""Many tracks: the planner constrains the riskiest few, in a documented order, and says how many it left out."""
+
+from __future__ import annotations
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.core.planner import Planner
+from companion.loop.app import Companion
+from companion.loop.config import load_scenario
+from companion.loop.planning import InlinePlanning
+from companion.loop.track_selection import choose, confidence_radius, rank_by_risk
+from companion.mavlink.link import Received
+
+
+def test_that_tracks_rank_by_predicted_clearance_then_time_of_closest_approach():
+    path = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    means = np.array([
+        [[0.0, 8.0, 0.0]] * 3,                                   # far, stays far
+        [[2.0, 3.0, 0.0]] * 3,                                   # 3 m from the last step
+        [[1.0, 3.0, 0.0]] * 3,                                   # 3 m from the middle step: same clearance, sooner
+        [[0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0]],     # alongside at 1 m
+    ])
+    order, clearance, t_close = rank_by_risk(path, means, np.zeros((4, 3)), 0.0, 1.0, 0.3, 2.0)
+    assert order.tolist() == [3, 2, 1, 0]
+    assert clearance.tolist() == [7.0, 2.0, 2.0, 0.0]
+    assert t_close[2] == 0.3 and t_close[1] == 0.6
+    # uncertainty counts against clearance: a wide track 4 m away outranks a sharp one 3 m away
+    wide = np.array([[[0.0, 4.0, 0.0]] * 3, [[0.0, 3.0, 0.0]] * 3])
+    order, _, _ = rank_by_risk(path[:1].repeat(3, 0), wide, np.array([[1.0] * 3, [0.0] * 3]), 0.0, 1.0, 0.3, confidence_radius(0.9))
+    assert order.tolist() == [0, 1]
+    chosen, rest = choose(np.array([3, 2, 1, 0]), 2)
+    assert chosen.tolist() == [2, 3] and rest.tolist() == [1, 0]
+
+
+def _received(msg, src, t_s, link: str = "autopilot") -> Received:
+    mav = mavlink2.MAVLink(None, *src)
+    raw = bytes(msg.pack(mav))
+    return Received(t_s, mav.parse_buffer(raw)[0], raw, link)
+
+
+def test_that_two_hundred_tracks_are_cut_to_the_limit_with_the_close_one_kept_and_the_rest_reported():
+    scenario = load_scenario("configs/antipodal.toml")
+    jobs = []
+
+    class Spy(InlinePlanning):
+        def submit(self, job):
+            jobs.append(job)
+            super().submit(job)
+
+    companion = Companion(scenario, planning=Spy(Planner(scenario.planner)))
+    hb = mavlink2.MAVLink_heartbeat_message(2, 12, 157 | 128, 6 << 16, 4, 3)  # PX4, armed, OFFBOARD
+    rng = np.random.default_rng(4)
+    far = np.column_stack([rng.uniform(-5, 25, 200), rng.choice([-1, 1], 200) * rng.uniform(5, 9, 200), np.full(200, -5.0)])
+    texts = []
+    sent_setpoints = 0
+    for i in range(8):
+        t = 0.05 * i
+        companion.handle(_received(hb, (1, 1), t))
+        companion.handle(_received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), 0, 0, -5, 0, 0, 0), (1, 1), t))
+        for k, p in enumerate(far):
+            companion.handle(_received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), *p, 0, 0, 0), (30 + k, 198), t, "obstacles1"))
+        companion.handle(_received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), 2.0, 0.2, -5, 0, 0, 0), (20, 197), t, "obstacles1"))
+        out = companion.tick(t)
+        texts += [m.text for m in out if m.get_type() == "STATUSTEXT"]
+        sent_setpoints += sum(m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" for m in out)
+    assert len(companion.tracker) == 201
+    limit = scenario.loop.max_constrained_tracks
+    assert companion.records, "no replan ran"
+    rec = companion.records[-1]
+    assert rec.tracks_unconstrained == 201 - limit
+    assert companion.state.tracks_unconstrained_max == 201 - limit
+    assert (20, 197, "obstacles1") in rec.obstacle_positions and len(rec.realised_contour) == 201  # all still tracked and measured
+    assert sum(f"{201 - limit} tracks beyond {limit} not constrained" in t for t in texts) == 1  # rate-limited
+    assert sent_setpoints == 8
+    assert len(jobs) == 2
+    for job in jobs:
+        assert job.request.num_obstacles == limit + len(scenario.static_obstacles)
+        assert (20, 197, "obstacles1") not in job.tracks_unconstrained  # the one 2 m ahead is constrained
+
+
+def test_that_the_request_builder_takes_each_tracks_radius_from_its_lookup():
+    from companion.loop.perception import Perception
+    from companion.loop.request_builder import RequestBuilder
+
+    scenario = load_scenario("configs/antipodal.toml")
+    perception = Perception(scenario)
+    perception.drone.update(0.0, np.array([0.0, 0.0, -5.0]), np.zeros(3), np.full(3, 0.01), np.full(3, 0.01))
+    big, default = ("icao", 0xABC), (20, 197, "obstacles1")
+    for key, pos in ((big, [6.0, 0.0, -5.0]), (default, [0.0, 6.0, -5.0])):
+        perception.tracker.update(key, 0.0, np.array(pos), np.zeros(3), 0.01 * np.eye(3), 0.01 * np.eye(3))
+    radii = {big: 10.0}
+    lookup = lambda key: radii.get(key, scenario.loop.obstacle_radius_m)  # noqa: E731
+    plain = RequestBuilder(scenario).build(seq=0, t_s=0.0, t_v=0.0, perception=perception,
+                                           initial_velocity=np.zeros(3), warm_start=None)
+    sized = RequestBuilder(scenario, obstacle_radius=lookup).build(seq=0, t_s=0.0, t_v=0.0, perception=perception,
+                                                                   initial_velocity=np.zeros(3), warm_start=None)
+    n_tracks = 2
+    assert plain.request.obstacle_radii[:n_tracks].tolist() == [scenario.loop.obstacle_radius_m] * 2
+    assert sized.request.obstacle_radii[:n_tracks].tolist() == [10.0, scenario.loop.obstacle_radius_m]
+    # the bigger body reaches the drone's contour sooner: a smaller realised contour of touch
+    assert sized.realised_contour[big] < plain.realised_contour[big]
+    assert sized.realised_contour[default] == plain.realised_contour[default]
