@@ -4,7 +4,7 @@ Pure and clock-free: every call takes the simulated time ``now_s`` and the true
 vehicle state. Messages to the ground station (STATUSTEXT) are queued in
 :attr:`Commander.texts` for the caller to send.
 
-Imitated (see ``PX4_OFFBOARD.md``):
+Imitated (see ``docs/PX4_FACTS.md``, sections 2, 3, 5 and 6):
 
 - custom_mode = (main << 16) | (sub << 24); base_mode 1 + 128 armed + mode flags
   (AUTO 4|8|16, POSCTL 64|16, OFFBOARD 16); system_status 3 standby, 4 active,

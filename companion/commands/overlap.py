@@ -26,9 +26,9 @@ from companion.core.overlap import (
 
 logger = logging.getLogger(__name__)
 
-#: Contours of touch in the printed table; includes the SPEC reference rows.
+#: Contours of touch in the printed table; includes the reference rows of docs/METHOD.md section 1.6.
 TABLE_CONFIDENCES = (0.05, 0.10, 0.20, 0.30, 0.40, 0.50, 0.60, 0.70, 0.80, 0.8051, 0.90, 0.95, 0.99)
-#: (dim, c) rows of SPEC section 2, marked on the figure.
+#: (dim, c) reference rows of docs/METHOD.md section 1.6, marked on the figure.
 REFERENCE_ROWS = ((2, 0.8051), (3, 0.60), (3, 0.30), (3, 0.90), (2, 0.90))
 #: The paper's Bhattacharyya pairs: (label, cov1, cov2, separation axis).
 BHATTACHARYYA_PAIRS = (

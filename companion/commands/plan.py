@@ -1,6 +1,6 @@
 """``companion plan``: one trajectory optimisation with the obstacles' motion known.
 
-This is the paper's single-obstacle evaluation (SPEC section 7, scenario 1): the
+This is the paper's single-obstacle evaluation (docs/METHOD.md section 4, scenario 1): the
 obstacles' trajectories are taken from the scenario file's ``[[world.obstacles]]`` (which
 the flying companion never reads; here, offline, they stand in for perfect prediction) and
 moved by mavsim's own motion model (``start_delay_s`` and ``loop`` included),

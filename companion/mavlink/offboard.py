@@ -1,6 +1,6 @@
 """The offboard sequence PX4 needs, as a pure state machine (no clock, no I/O).
 
-PX4's offboard contract (``shared/PX4_OFFBOARD.md``): setpoints must already be
+PX4's offboard contract (``docs/PX4_FACTS.md``, section 3): setpoints must already be
 streaming when OFFBOARD is requested; MAV_CMD_DO_SET_MODE with main mode 6 asks
 for it; the only proof that the switch happened is the autopilot's HEARTBEAT
 showing main mode 6. A COMMAND_ACK 0 proves nothing: current PX4 answers 0 and

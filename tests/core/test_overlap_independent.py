@@ -5,7 +5,7 @@
 - ``eta`` as the largest radius at which the confidence ellipsoids are disjoint: a
   separating hyperplane exists just below it, a common point just above it;
 - seeded Monte Carlo: the mass of each Gaussian on the wrong side of the minmax
-  hyperplane, and the collision bound of SPEC section 2 with physical radii;
+  hyperplane, and the collision bound of docs/METHOD.md section 1.5 with physical radii;
 - hard inputs (coincident means, nearly singular and strongly anisotropic covariances).
 """
 

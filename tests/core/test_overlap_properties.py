@@ -80,7 +80,7 @@ def test_that_scaling_the_mean_separation_by_k_scales_eta_by_k(pair, k):
 def test_that_the_admissibility_residual_vanishes_and_eta_overlap_are_in_range(pair):
     mu1, cov1, mu2, cov2, _ = pair
     r = minmax(mu1, cov1, mu2, cov2)
-    # recompute eta1, eta2 from the returned alpha, beta with the SPEC's formulas
+    # recompute eta1, eta2 from the returned alpha, beta with the formulas of docs/METHOD.md section 1.1
     eta1 = (r.beta - r.alpha @ mu1) / np.sqrt(r.alpha @ cov1 @ r.alpha)
     eta2 = (r.alpha @ mu2 - r.beta) / np.sqrt(r.alpha @ cov2 @ r.alpha)
     assert abs(eta1 - eta2) <= 1e-10 * eta1
@@ -91,7 +91,7 @@ def test_that_the_admissibility_residual_vanishes_and_eta_overlap_are_in_range(p
     assert 0.0 <= float(r.overlap) <= 1.0  # underflows to 0 for eta beyond ~38
     assert 0.0 <= float(r.confidence) <= 1.0  # rounds to 1 for eta beyond ~8.5
     assert abs(np.linalg.norm(r.normal) - 1.0) < 1e-14
-    # alpha is the SPEC's (lam S1 + (1-lam) S2)^-1 (mu2 - mu1)
+    # alpha is docs/METHOD.md section 1.1's (lam S1 + (1-lam) S2)^-1 (mu2 - mu1)
     alpha = np.linalg.solve(r.lam * cov1 + (1 - r.lam) * cov2, mu2 - mu1)
     np.testing.assert_allclose(r.alpha, alpha, rtol=1e-6, atol=1e-9 * np.abs(alpha).max())
 

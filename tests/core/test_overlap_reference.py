@@ -1,4 +1,4 @@
-"""Overlap core against published values and closed forms (SPEC section 2, the paper).
+"""Overlap core against published values and closed forms (docs/METHOD.md section 1.6, the paper).
 
 References here are independent of ``companion.core.overlap``: ``scipy.stats.chi2`` and
 ``scipy.stats.norm`` for the confidence/radius/overlap maps, a direct numpy formula for
@@ -22,7 +22,7 @@ from companion.core.overlap import (
     touch_radius,
 )
 
-# (d, c, r, Y) exactly as printed in SPEC section 2.
+# (d, c, r, Y) as printed in docs/METHOD.md section 1.6 (the paper's values).
 REFERENCE_ROWS = [
     (2, 0.8051, 1.8085, 0.0705),
     (3, 0.60, 1.7164, 0.0861),

@@ -1,7 +1,7 @@
 """Planner-facing terms: paper_terms gradients, eta gradient, support margin, contour of touch.
 
 Gradients are checked against central finite differences of the values, and the values
-against the SPEC's formulas computed here in plain numpy.
+against the formulas of docs/METHOD.md (sections 1.4 and 2.6) computed here in plain numpy.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def test_that_paper_terms_gradients_match_central_finite_differences(radius_sum)
         np.testing.assert_allclose(terms.g_grad_lam, g_lam, rtol=1e-5, atol=1e-9)
 
 
-def test_that_paper_terms_values_follow_the_spec_formulas():
+def test_that_paper_terms_values_follow_the_formulas_of_the_method():
     for mu1, cov1, mu2, cov2, rng in _pairs(32):
         lam, radius = rng.uniform(0.1, 0.9), rng.uniform(0.0, 0.5)
         alpha = np.linalg.solve(lam * cov1 + (1 - lam) * cov2, mu2 - mu1)
@@ -80,7 +80,7 @@ def test_that_the_eta_gradient_matches_finite_differences_of_eta():
         np.testing.assert_allclose(res.eta_grad_mu1, fd, rtol=1e-6, atol=1e-8 * np.abs(fd).max())
 
 
-def test_that_support_margin_follows_the_spec_and_ignores_the_length_of_the_normal():
+def test_that_support_margin_follows_the_method_and_ignores_the_length_of_the_normal():
     for mu1, cov1, mu2, cov2, rng in _pairs(35):
         n = rng.standard_normal(mu1.size)
         u = n / np.linalg.norm(n)

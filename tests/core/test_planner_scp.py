@@ -21,7 +21,7 @@ GOAL = np.array([10.0, 0.0, -5.0])
 
 
 def scenario_one(formulation: str = "hyperplane", **overrides) -> tuple[PlannerConfig, PlanRequest]:
-    """SPEC section 7 scenario 1 (as in configs/single_obstacle.toml): head-on, 0.5 m radii."""
+    """docs/METHOD.md section 4, scenario 1 (as in configs/single_obstacle.toml): head-on, 0.5 m radii."""
     n = 20
     kwargs = dict(formulation=formulation, horizon_steps=n, step_s=1.0, c_min=0.6, velocity_max_mps=(3.0, 3.0, 1.0),
                   accel_max_mps2=(0.5, 0.5, 0.5), drone_radius_m=0.5, sensing_range_m=20.0)

@@ -161,7 +161,7 @@ def test_that_a_reliability_bin_exceeds_its_promise_only_when_its_interval_lies_
 
 
 def test_that_the_bound_is_phi_of_minus_the_touch_radius():
-    # SPEC section 2: c = 0.90 in 3-D -> r = 2.5003, Y = 0.0124, bound Phi(-r) = Y / 2
+    # docs/METHOD.md sections 1.5-1.6: c = 0.90 in 3-D -> r = 2.5003, Y = 0.0124, bound Phi(-r) = Y / 2
     assert collision_bound(0.90) == pytest.approx(0.0124 / 2, rel=2e-3)
 
 

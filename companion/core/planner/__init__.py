@@ -1,4 +1,4 @@
-"""Overlap-constrained MPC: sequential convex programming on OSQP (SPEC section 3).
+"""Overlap-constrained MPC: sequential convex programming on OSQP (docs/METHOD.md section 2).
 
 Pure core: arrays and frozen dataclasses in, a :class:`Plan` out; no sockets, threads,
 plotting, or clocks (``time.perf_counter`` only feeds the ``solve_time_s`` diagnostic).

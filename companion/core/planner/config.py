@@ -22,7 +22,7 @@ from companion.errors import ConfigError
 
 logger = logging.getLogger(__name__)
 
-#: Selectable collision formulations (SPEC section 3). ``hyperplane`` and ``paper`` bound
+#: Selectable collision formulations (docs/METHOD.md section 2.6). ``hyperplane`` and ``paper`` bound
 #: the overlap of Gaussians; ``deterministic`` and ``bhattacharyya`` are baselines.
 FORMULATIONS: tuple[str, ...] = ("hyperplane", "paper", "deterministic", "bhattacharyya")
 
@@ -64,7 +64,7 @@ def _vehicle_response(value: Any) -> tuple[AxisResponse, AxisResponse]:
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    """Configuration of the overlap-constrained MPC (SPEC section 3).
+    """Configuration of the overlap-constrained MPC (docs/METHOD.md section 2).
 
     Parameters
     ----------

@@ -12,7 +12,7 @@ evaluated around the SCP iterate ``p_bar`` (and ``lam_bar`` for ``paper``). Arra
 - ``hyperplane``: minmax normal ``n`` and ``s_k = sqrt(n' S_k n)`` at the iterate; the
   row ``n.(o_i - p_i) >= r_min (s1 + s2) + R`` is linear in ``p_i`` and, with ``n`` fixed,
   exact: any ``p_i`` meeting it has support margin >= ``r_min`` along ``n``, hence a
-  contour of touch >= ``c_min`` (SPEC section 2). With ``c_max`` the same row is bounded
+  contour of touch >= ``c_min`` (docs/METHOD.md sections 1.4-1.5). With ``c_max`` the same row is bounded
   above by ``r_max (s1 + s2) + R`` (the linearisation of ``eta <= r_max``, gradient
   ``eta_grad_mu1 = -n/(s1+s2)`` scaled by ``s1 + s2``).
 - ``paper``: ``h(p, lam) >= r_min`` (and ``<= r_max``) and the admissibility residual

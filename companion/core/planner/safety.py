@@ -3,7 +3,7 @@
 These use the exact minmax separator on the returned positions and covariances, never
 the SCP's linearisation. With physical radii ``R = R_drone + R_obstacle`` the touch
 radius is the support margin along the minmax normal,
-``eta = (n.(o - p) - R) / (s1 + s2)`` (SPEC section 2); the collision probability at that
+``eta = (n.(o - p) - R) / (s1 + s2)`` (docs/METHOD.md sections 1.4-1.5); the collision probability at that
 step is then at most ``Phi(-eta)``.
 """
 

@@ -1,4 +1,4 @@
-"""The planner: sequential convex programming on OSQP (SPEC section 3, paper Algorithm 1).
+"""The planner: sequential convex programming on OSQP (docs/METHOD.md section 2.7; the paper's Algorithm 1).
 
 Each SCP iteration linearises the collision rows around the current iterate
 (:mod:`companion.core.planner.formulations`), writes them into the fixed QP pattern
