@@ -34,6 +34,7 @@ logger = logging.getLogger(__name__)
 TAKEOFF_ALT_M = 5.0
 COMPANION_TIMEOUT_S = 150.0
 HOLD_WATCH_S = 4.0
+OBSTACLE_PORT = 14601  # the companion's receive-only obstacle link (`fly --obstacles`)
 AUTO, LOITER = 4, 3
 
 
@@ -52,12 +53,13 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
     paths = paths_from_scenario(str(scenario))
     result: dict = {"work": str(work)}
     with Sitl(work / "sih") as sitl:
-        world = World(paths, seed=seed)
+        world = World(paths, seed=seed, companion_port=OBSTACLE_PORT)
         world.start()
         try:
             try:   # subprocess.run kills the companion on the timeout
                 proc = subprocess.run(
                     _companion("fly", "--connect", "udpin:127.0.0.1:14540", "--scenario", str(scenario), "--arm",
+                               "--obstacles", f"udpin:127.0.0.1:{OBSTACLE_PORT}",
                                "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--tlog", str(tlog),
                                "--duration", str(COMPANION_TIMEOUT_S - 20), "--json", *extra),
                     capture_output=True, text=True, timeout=COMPANION_TIMEOUT_S, cwd=REPO)

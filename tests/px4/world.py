@@ -9,8 +9,9 @@ A :class:`World` runs in a thread beside PX4 and the companion:
 - It flies the scenario's obstacles in straight lines at their speed, starting when
   PX4's HEARTBEAT first shows OFFBOARD, and sends each one as LOCAL_POSITION_NED (with
   the scenario's measurement noise, seeded) from its own system id straight to the
-  companion's port 14540 over loopback, never to PX4 (PX4 would take ODOMETRY as the
-  vehicle's own external vision).
+  companion's obstacle link over loopback (``companion_port``; the flight uses 14601 and
+  ``fly --obstacles``: the autopilot link refuses other systems' positions), never to PX4
+  (PX4 would take ODOMETRY as the vehicle's own external vision).
 
 Units: seconds, metres, NED.
 """
