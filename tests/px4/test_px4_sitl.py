@@ -3,11 +3,11 @@
 Starts PX4 SIH in a fresh working directory, flies ``companion fly --arm --takeoff-alt 5``
 through the antipodal encounter with obstacles reported as LOCAL_POSITION_NED from their
 own system ids over loopback (:mod:`tests.px4.world`), and checks against SIH's ground
-truth. Asserted: no collision in truth, the vehicle holding (AUTO.LOITER) without a
-failsafe after the companion stops, and ``companion replay`` reproducing every recorded
-command. Printed, not yet asserted (met 1 time in 5 so far): the takeoff height within
-0.3 m, the realised contour of touch never below ``c_min``, the goal within 25 s of
-engaging OFFBOARD (``python -m tests.px4.flight --runs 5`` judges all of them).
+truth. Asserted: no collision in truth, and the vehicle holding (AUTO.LOITER) without a
+failsafe after the companion stops. Printed, not yet asserted (met 1 time in 5 so far):
+the takeoff height within 0.3 m, the realised contour of touch never below ``c_min``, the
+goal within 25 s of engaging OFFBOARD, and ``companion replay`` reproducing every recorded
+command exactly (``python -m tests.px4.flight --runs 5`` judges all of them).
 Everything started is stopped; a few minutes in all.
 """
 
