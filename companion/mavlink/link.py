@@ -4,6 +4,10 @@ Every link packs outbound messages with the companion's own identity and parses
 inbound bytes with its own MAVLink 2 parser, so the real and in-memory links
 behave the same: garbage and bad CRCs are logged and dropped, never raised.
 
+(Over 400 lines: one job, getting bytes on and off a connection; the real and in-memory
+links share the parser, the packing, the roles and the answering rule, and splitting them
+would put those in a third module both import.)
+
 Identity. The companion sits on the vehicle, so it uses the vehicle's system id
 (1, PX4's default MAV_SYS_ID) and component id 191 (MAV_COMP_ID_ONBOARD_COMPUTER),
 as MAVLink's microservice guide asks of companion computers. Both are

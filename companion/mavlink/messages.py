@@ -4,6 +4,10 @@ Pure: functions take pymavlink message objects (``pymavlink.dialects.v20.common`
 and numbers, and return dataclasses or message objects. Packing (sequence
 numbers, source ids, signing) belongs to :mod:`companion.mavlink.link`.
 
+(Over 400 lines: one job, the vehicle's own wire format in both directions: every kind
+the autopilot sends, with its rejection reasons, and every kind the companion sends.
+Traffic from other systems is decoded in :mod:`companion.mavlink.traffic`.)
+
 Decoding never raises on bad traffic: a message that cannot be trusted comes back
 as :class:`Rejected` and is logged. Encoding raises :class:`~companion.errors.InputError`
 (a ``ValueError``) on non-finite input, because a wrong command must never be sent.

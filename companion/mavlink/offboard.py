@@ -1,5 +1,8 @@
 """The offboard sequence PX4 needs, as a pure state machine (no clock, no I/O).
 
+(Over 400 lines: one state machine, its configuration and its phases; a split would
+separate transitions that must be read together: arm, take off, engage, hand back.)
+
 PX4's offboard contract (``docs/PX4_FACTS.md``, section 3): setpoints must already be
 streaming when OFFBOARD is requested; MAV_CMD_DO_SET_MODE with main mode 6 asks
 for it; the only proof that the switch happened is the autopilot's HEARTBEAT
