@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import logging
@@ -93,39 +94,26 @@ def run(args: argparse.Namespace) -> int:
         """Once the vehicle holds after --exit-after-goal (the sequencer hands it back), or on giving up."""
         return c.sequencer.phase.name in ("HELD", "GAVE_UP")
 
-    tlog = None
-    link = None
-    obstacle_links = []
-    try:
+    stats = None
+    with contextlib.ExitStack() as resources:  # each closed once, in reverse order, however the run ends
+        resources.callback(worker.close)
         tlog = TlogWriter(args.tlog) if args.tlog else None  # the stream writes it, in handling order
+        if tlog is not None:
+            resources.callback(tlog.close)
         link = open_link(args.connect, clock=microsecond_clock, signing_key=signing_key)
+        resources.callback(link.close)
         # receive-only obstacle links: their traffic goes into the same tlog, written by the stream
+        obstacle_links = []
         for i, url in enumerate((*scenario.traffic.obstacle_links, *args.obstacles)):
             obstacle_links.append(open_link(url, clock=microsecond_clock, signing_key=signing_key,
                                             name=obstacle_link_name(i), receive_only=True))
-    except BaseException:
-        for ob in obstacle_links:
-            ob.close()
-        if link is not None:
-            link.close()
-        worker.close()
-        if tlog is not None:
-            tlog.close()
-        raise
-    started = microsecond_clock()
-    stats = None
-    try:
-        stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock, tlog=tlog,
-                             obstacle_links=obstacle_links)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        for ob in obstacle_links:
-            ob.close()
-        link.close()
-        worker.close()
-        if tlog is not None:
-            tlog.close()
+            resources.callback(obstacle_links[-1].close)
+        started = microsecond_clock()
+        try:
+            stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock,
+                                 tlog=tlog, obstacle_links=obstacle_links)
+        except KeyboardInterrupt:
+            pass
     report = companion_report(companion)
     for key in ("events", "failsafe_events"):  # seconds since the start of this run, not epoch
         report[key] = [(round(t - started, 2), text) for t, text in report[key]]
