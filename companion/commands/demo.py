@@ -58,7 +58,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--signing-key-env", metavar="NAME",
                    help="with --realtime: both programs sign with the key in environment variable NAME")
     p.add_argument("--crowd", type=integer_at_least(0), default=0, metavar="N",
-                   help=f"with --realtime: N extra stationary systems (at most {MAX_SYSTEMS}) report from 4-9 m beside the route")
+                   help=f"with --realtime: N extra stationary systems (at most {MAX_SYSTEMS}) report from 6-10 m beside the route "
+                        "to the companion's obstacle port")
     p.set_defaults(func=run)
 
 
@@ -193,7 +194,7 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
     fly_error = None
     try:
         if args.crowd:
-            crowd = _crowd(scenario, args.crowd, args.seed, api_port, gcs_port)
+            crowd = _crowd(scenario, args.crowd, args.seed, obstacle_port, gcs_port)  # on the obstacle link, as a perception source would
         try:
             fly_out, fly_err = fly.communicate(timeout=fly_duration_s + 60.0)
         except subprocess.TimeoutExpired:

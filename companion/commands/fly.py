@@ -13,7 +13,7 @@ import time
 from companion.commands._argtypes import non_negative_seconds, output_file, positive_number, positive_seconds
 from companion.errors import CompanionError, ConfigError
 from companion.loop.app import Companion
-from companion.loop.realtime import PlanWorker, run_realtime
+from companion.loop.realtime import PlanWorker, raise_stream_priority, run_realtime
 from companion.loop.traffic_config import obstacle_link_name
 from companion.mavlink.link import DEFAULT_URL, open_link
 from companion.mavlink.tlog import TlogWriter
@@ -89,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
         worker.close()
         raise CompanionError(f"the planning process did not start within {_PLANNER_START_S:.0f} s")
     companion = Companion(scenario, offboard=offboard, planning=worker)
+    stream_nice = raise_stream_priority()  # the planning process, started above, keeps its priority
 
     def stop(c: Companion) -> bool:
         """Once the vehicle holds after --exit-after-goal (the sequencer hands it back), or on giving up."""
@@ -126,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
         "solved": worker.stats.solved, "superseded": worker.stats.superseded, "errors": worker.stats.errors,
         "max_solve_ms": round(worker.stats.max_solve_s * 1e3, 1),
     }
+    report["stream_nice"] = stream_nice
     report["signing"] = signing_key is not None
     report["signature_rejected"] = link.stats.signature_rejected
     if args.json:

@@ -44,6 +44,11 @@ SEV_INFO = mavlink2.MAV_SEVERITY_INFO
 _HEARTBEAT_PERIOD_S = 1.0
 _SLACK_WARN_PERIOD_S = 2.0
 _UNCONSTRAINED_WARN_PERIOD_S = 5.0
+_SIGNATURE_WARN_PERIOD_S = 5.0  # as mavsim's
+
+#: Start of the STATUSTEXT announcing packets dropped for a bad or missing MAVLink 2
+#: signature; the text ends with the links' running total: ``"... (12 rejected)"``.
+SIGNATURE_TEXT = "companion: bad or no signature ("
 
 Outbox = list[mavlink2.MAVLink_message]
 
@@ -97,6 +102,9 @@ class Companion:
         self._last_slack_warn = -math.inf
         self._last_unconstrained_warn = -math.inf
         self._plan_too_old = False  # braking for an old plan was announced
+        self._signatures_rejected = 0
+        self._signatures_announced = 0
+        self._last_signature_warn = -math.inf
 
     @property
     def planner(self) -> Planner:
@@ -157,6 +165,15 @@ class Companion:
         elif isinstance(decoded, messages.HomePosition):
             self.sequencer.on_home_altitude(decoded.altitude_amsl_m)
 
+    def on_signatures_rejected(self, total: int) -> None:
+        """The links' running count of packets dropped for a bad or missing signature.
+
+        The real-time edge reports it before every tick (a rejected packet never reaches
+        :meth:`handle`); the next tick announces new rejections in a STATUSTEXT
+        (:data:`SIGNATURE_TEXT`, at most one every 5 s, the count in the text).
+        """
+        self._signatures_rejected = max(self._signatures_rejected, int(total))
+
     # ------------------------------------------------------------------ outbound
 
     def tick(self, t_s: float) -> Outbox:
@@ -170,6 +187,10 @@ class Companion:
                 out.append(action.msg)
             elif isinstance(action, Notify):
                 out.append(self._say(t_s, action.event.severity, action.event.text))
+        if self._signatures_rejected > self._signatures_announced \
+                and t_s - self._last_signature_warn >= _SIGNATURE_WARN_PERIOD_S:
+            self._signatures_announced, self._last_signature_warn = self._signatures_rejected, t_s
+            out.append(self._say(t_s, SEV_WARNING, f"{SIGNATURE_TEXT}{self._signatures_rejected} rejected)"))
         requests, texts = self.obstacles.outbound(t_s, self.autopilot)
         out.extend(requests)
         out.extend(self._say(t_s, severity, text) for severity, text in texts)

@@ -3,8 +3,9 @@
 ``companion demo --realtime --crowd N`` (and the real-time tests) start a :class:`Crowd`
 beside mavsim: N systems, each with its own MAVLink identity (system 30.., component
 198), placed off the mission's route (:func:`positions_off_route`), each sending
-LOCAL_POSITION_NED to the companion's UDP port at ``rate_hz``. The reports are stamped on
-the vehicle's boot clock, which the crowd learns by listening where mavsim sends its
+ODOMETRY to the companion's obstacle port (a receive-only obstacle link) at ``rate_hz``,
+with the accuracy of a perception source (position standard deviation 0.2 m, velocity
+0.1 m/s, in the message's covariances). The reports are stamped on the vehicle's boot clock, which the crowd learns by listening where mavsim sends its
 ground-station stream (any message with ``time_boot_ms``), as an obstacle perception
 process on the vehicle would share its clock. Until it has heard the vehicle, it sends
 nothing. One thread; every socket operation is non-blocking and every wait bounded.
@@ -27,10 +28,21 @@ logger = logging.getLogger(__name__)
 FIRST_SYSTEM_ID = 30
 COMPONENT_ID = 198  # distinct from mavsim's obstacle component, so keys never collide
 MAX_SYSTEMS = 200
+POSITION_VAR_M2 = 0.04     # (0.2 m)^2, reported in each ODOMETRY's pose covariance
+VELOCITY_VAR_M2PS2 = 0.01  # (0.1 m/s)^2
+_MAV_FRAME_LOCAL_NED = 1
+
+
+def _upper_triangle(diagonal: float) -> list[float]:
+    """MAVLink's 21-element row-major upper triangle of a 6x6 covariance: ``diagonal`` on the x, y, z entries, 0 elsewhere."""
+    cov = [0.0] * 21
+    for i in (0, 6, 11):  # (0,0), (1,1), (2,2)
+        cov[i] = diagonal
+    return cov
 
 
 def positions_off_route(
-    start: np.ndarray, goal: np.ndarray, n: int, *, seed: int = 0, lateral_m: tuple[float, float] = (4.0, 9.0)
+    start: np.ndarray, goal: np.ndarray, n: int, *, seed: int = 0, lateral_m: tuple[float, float] = (6.0, 10.0)
 ) -> np.ndarray:
     """``n`` points (NED m) beside the straight route from ``start`` to ``goal``.
 
@@ -57,7 +69,7 @@ class CrowdStats:
 
 
 class Crowd:
-    """N stationary systems reporting LOCAL_POSITION_NED to ``target`` (see the module docstring).
+    """N stationary systems reporting ODOMETRY to ``target`` (see the module docstring).
 
     Parameters
     ----------
@@ -81,6 +93,8 @@ class Crowd:
         self.target = target
         self.rate_hz = float(rate_hz)
         self.stats = CrowdStats()
+        self._pose_cov = _upper_triangle(POSITION_VAR_M2)
+        self._velocity_cov = _upper_triangle(VELOCITY_VAR_M2PS2)
         self._senders = [mavlink2.MAVLink(None, FIRST_SYSTEM_ID + i, COMPONENT_ID) for i in range(len(positions))]
         self._out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._out.bind(("127.0.0.1", 0))
@@ -136,11 +150,13 @@ class Crowd:
             self._listen()
             now = time.monotonic()
             if self._offset_s is not None and now >= next_t:
-                boot_ms = int((now - self._offset_s) * 1000.0)
+                boot_us = int((now - self._offset_s) * 1e6)
                 chunk = range(i * n // slots, (i + 1) * n // slots)
                 for k in chunk:
                     p = self.positions[k]
-                    msg = mavlink2.MAVLink_local_position_ned_message(boot_ms, p[0], p[1], p[2], 0.0, 0.0, 0.0)
+                    msg = mavlink2.MAVLink_odometry_message(
+                        boot_us, _MAV_FRAME_LOCAL_NED, _MAV_FRAME_LOCAL_NED, p[0], p[1], p[2], [1.0, 0.0, 0.0, 0.0],
+                        0.0, 0.0, 0.0, 0.0, 0.0, 0.0, self._pose_cov, self._velocity_cov, 0, 0, 100)
                     try:
                         self._out.sendto(msg.pack(self._senders[k]), self.target)
                         self.stats.sent += 1

@@ -72,7 +72,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.mavlink import messages
 from companion.core.planner import Planner
 from companion.loop.app import Companion
-from companion.offline.replay_stand_ins import AssumeEngaged, RecordedArrivals, arrivals
+from companion.offline.replay_stand_ins import AssumeEngaged, RecordedArrivals, arrivals, signatures_rejected
 from companion.loop.records import status_counts
 from companion.errors import CompanionError
 from companion.mavlink.link import DEFAULT_SOURCE_COMPONENT, DEFAULT_SOURCE_SYSTEM, Received
@@ -346,6 +346,9 @@ def replay(
         t = ev.t_us * 1e-6
         if schedule is not None:
             schedule.arrivals = arrivals(ev.recorded)
+        rejected = signatures_rejected(ev.recorded)
+        if rejected is not None:  # what the recording's links counted (dropped packets are not in a tlog)
+            companion.on_signatures_rejected(rejected)
         out = companion.tick(t)
         ticks += 1
         sp = next((m for m in reversed(out) if m.get_type() == _SETPOINT), None)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 
 from companion.core.planner import Planner
-from companion.loop.app import PLAN_ARRIVED
+from companion.loop.app import PLAN_ARRIVED, SIGNATURE_TEXT
 from companion.loop.planning import PlanResult
 from companion.loop.request_builder import ReplanJob
 from companion.mavlink import messages
@@ -101,6 +101,22 @@ class RecordedArrivals:
             done.append(PlanResult(job, self.planner.solve(job.request, warm_start=job.warm_start)))
         self.arrivals = []
         return done
+
+
+def signatures_rejected(recorded: list) -> int | None:
+    """The links' count of rejected signatures announced among a recorded tick's messages, if any.
+
+    A packet dropped for its signature never reaches the tlog, so the replay learns the
+    count from the companion's own announcement (:data:`companion.loop.app.SIGNATURE_TEXT`).
+    """
+    for m in recorded:
+        if m.get_type() == "STATUSTEXT":
+            text = bytes(m.text).decode("ascii", "replace") if not isinstance(m.text, str) else m.text
+            if text.startswith(SIGNATURE_TEXT):
+                digits = text[len(SIGNATURE_TEXT):].split(" ", 1)[0]
+                if digits.isdigit():
+                    return int(digits)
+    return None
 
 
 def arrivals(recorded: list) -> list[int]:
