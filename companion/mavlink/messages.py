@@ -59,6 +59,11 @@ _UT_COLS = np.array([0, 1, 2, 1, 2, 2])
 _UT_INDEX = np.array([0, 1, 2, 6, 7, 11])
 
 STATUSTEXT_MAX_CHARS = 50
+#: Largest variance a reported covariance may hold (m^2 or (m/s)^2): a standard deviation
+#: of 100 m (or m/s), ten times the default sensing range, says nothing an avoidance
+#: planner can use; a report claiming more (1e30 m^2 was seen in testing) is rejected, as
+#: it would otherwise make every plan infeasible.
+MAX_REPORTED_VARIANCE = 1e4
 NAMED_VALUE_MAX_CHARS = 10
 UINT32_WRAP = 1 << 32
 
@@ -263,7 +268,8 @@ def covariance_from_upper_triangle(values, *, what: str) -> np.ndarray | None | 
 
     Returns the symmetric (3, 3) matrix, None when element 0 is NaN (unknown, as
     MAVLink defines it), or a string giving the reason it cannot be trusted
-    (wrong length, non-finite entry, negative variance, not positive definite).
+    (wrong length, non-finite entry, negative variance, a variance above
+    :data:`MAX_REPORTED_VARIANCE`, not positive definite).
     """
     arr = np.asarray(values, dtype=float)
     if arr.shape != (21,):
@@ -279,6 +285,8 @@ def covariance_from_upper_triangle(values, *, what: str) -> np.ndarray | None | 
     diag = np.diag(cov)
     if np.any(diag < 0.0):
         return f"{what} has negative variances {diag.tolist()}"
+    if np.any(diag > MAX_REPORTED_VARIANCE):
+        return f"{what} has variances above {MAX_REPORTED_VARIANCE:g}: {diag.tolist()}"
     try:
         np.linalg.cholesky(cov)
     except np.linalg.LinAlgError:

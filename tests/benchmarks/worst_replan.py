@@ -1,14 +1,16 @@
 """The largest replan per scene family, in work units and in milliseconds, against the bound.
 
 Flies the lockstep demos (``companion demo antipodal``; ``companion demo corridor --seed S``
-with and without ``c_max`` for S in 0..7) and a small antipodal campaign, records every
+with and without ``c_max`` for S in 0..7), a small antipodal campaign and the antipodal demo
+with hostile obstacle traffic (:mod:`tests.support.hostile_scenes`: 200 extra systems beside
+the route, 20 ids on a 6 m ring across it, one obstacle reporting a 1e30 m^2 covariance), records every
 replan's work (:attr:`companion.core.planner.Plan.work`) and wall time, and prints one
 row per scene family: replans, largest work, largest and 99th-percentile time, the
 budget (``replan_work_budget``), how many replans the budget bound, and the replan
 period the largest replan must stay under. Wall times are from ``time.perf_counter`` on
 whatever the machine is doing (shared machines inflate them; work units do not move).
 
-Run: ``python -m tests.benchmarks.worst_replan [--seeds 0-7] [--episodes 4] [--json PATH]``
+Run: ``python -m tests.benchmarks.worst_replan [--seeds 0-7] [--episodes 4] [--json PATH] [--markdown]``
 (about 2 core-minutes per corridor flight on a quiet 2-core machine). Not part of
 ``make bench`` (too long); :mod:`tests.benchmarks.bench_budget` runs a short version
 (antipodal and corridor seed 0).
@@ -29,6 +31,7 @@ import numpy as np
 
 from companion.core.planner import Planner
 from companion.core.planner.budget import QP_SOLVE_WORK
+from tests.support.hostile_scenes import SCENES, hostile_antipodal
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
@@ -123,6 +126,12 @@ def measure(seeds: list[int], episodes: int, families: list[str], budget: int | 
             for s in seeds:
                 _fly(rec.current, CONFIGS / "corridor.toml", s, c_max=None, **extra)
             rows.append(rec.current.row())
+        for scene in SCENES:  # hostile obstacle traffic added to the antipodal demo (tests/support/hostile_scenes.py)
+            if f"hostile-{scene}" in families:
+                rec.current = FamilyStats(f"antipodal + hostile {scene} (seed 0)")
+                with tempfile.TemporaryDirectory(prefix="worst-replan-") as tmp:
+                    _fly(rec.current, hostile_antipodal(scene, Path(tmp)), 0, **extra)
+                rows.append(rec.current.row())
         if "campaign" in families and episodes:
             rec.current = FamilyStats(f"antipodal campaign, hyperplane ({episodes} episodes, seed 1)")
             with tempfile.TemporaryDirectory(prefix="worst-replan-") as tmp:
@@ -152,6 +161,19 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def format_markdown(rows: list[dict]) -> str:
+    """The table as markdown: largest replan per scene family against the work budget."""
+    lines = ["| scene family | flights | replans | work max | work p99 | budget | cut by budget | ms max | ms p99 | ms median "
+             "| goal / collided |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['family']} | {r['flights']} | {r['replans']} | {r['work_max']} | {r['work_p99']:.0f} | {r['budget']} "
+                     f"| {r['budget_bound']} | {r['ms_max']:.1f} | {r['ms_p99']:.1f} | {r['ms_median']:.1f} "
+                     f"| {r['goal_reached']} / {r['collided']} |")
+    lines.append(f"\nwork = ADMM iterations of all QPs of a replan + {QP_SOLVE_WORK} per QP solve; the bound is the "
+                 "budget (`replan_work_budget`); wall times from `time.perf_counter` on the machine as loaded.")
+    return "\n".join(lines)
+
+
 def _seeds(text: str) -> list[int]:
     if "-" in text:
         a, b = text.split("-", 1)
@@ -164,12 +186,17 @@ def main(argv: list[str]) -> int:
     p = argparse.ArgumentParser(prog="python -m tests.benchmarks.worst_replan", description=__doc__.split("\n")[0])
     p.add_argument("--seeds", type=_seeds, default=list(range(8)), help="corridor seeds, e.g. 0-7 or 0,3")
     p.add_argument("--episodes", type=int, default=4, help="antipodal campaign episodes (hyperplane)")
-    p.add_argument("--families", default="antipodal,corridor,corridor-no-cmax,campaign")
+    p.add_argument("--families", default="antipodal,corridor,corridor-no-cmax,campaign,"
+                   + ",".join(f"hostile-{scene}" for scene in SCENES))
+    p.add_argument("--markdown", action="store_true", help="also print the table as markdown")
     p.add_argument("--budget", type=int, help="override replan_work_budget (e.g. a huge one to see the unbounded work)")
     p.add_argument("--json", type=Path, help="also write the rows as JSON")
     args = p.parse_args(argv)
     rows = measure(args.seeds, args.episodes, args.families.split(","), args.budget)
     print(format_table(rows))
+    if args.markdown:
+        print()
+        print(format_markdown(rows))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))
     return 0

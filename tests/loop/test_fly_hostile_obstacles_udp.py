@@ -1,0 +1,146 @@
+"""Hostile obstacle reports at ``companion fly``'s obstacle link over loopback UDP (issue 14).
+
+mavsim serves ``short_hop`` in a thread; ``companion fly`` runs as its own process with an
+obstacle link; a third socket sends that link well-formed but hostile ODOMETRY and
+LOCAL_POSITION_NED the whole flight: covariances of 1e30 m^2, NaN and infinite fields,
+100 systems on a 6 m ring round the route, and stamps of 0xFFFFFFFF. The companion must
+not crash, must stream only finite setpoints at its rate, fly the mission without
+collision and count the reports it refuses. About 25 s of wall time.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.mavlink.tlog import read_tlog
+from mavsim.core import Simulator
+from mavsim.scenario import load_scenario
+from mavsim.udp import LinkAddress, UdpServer
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIO = ROOT / "tests" / "data" / "short_hop.toml"
+RING_IDS = range(150, 250)  # 100 systems
+HUGE, NAN, INF = 1e30, float("nan"), float("inf")
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _cov(var: float) -> list[float]:
+    cov = [0.0] * 21
+    for i in (0, 6, 11):
+        cov[i] = var
+    return cov
+
+
+class HostileSender:
+    """Sends one round of every hostile kind every 0.1 s (about 1000 reports per second)."""
+
+    def __init__(self, port: int, seed: int = 3) -> None:
+        self.port = port
+        self.rng = np.random.default_rng(seed)
+        self.sent = 0
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.mav = {sysid: mavlink2.MAVLink(None, sysid, 197) for sysid in (*RING_IDS, 140, 141, 142, 143)}
+
+    def _round(self, t_s: float) -> list[bytes]:
+        def pack(sysid: int, msg) -> bytes:
+            mav = self.mav[sysid]
+            packet = bytes(msg.pack(mav))
+            mav.seq = (mav.seq + 1) % 256
+            return packet
+
+        t_us, t_ms = int(t_s * 1e6), int(t_s * 1e3)
+        odometry = mavlink2.MAVLink_odometry_message
+        out = [
+            # a covariance of 1e30 m^2, everything else plausible, 2 m beside the route
+            pack(140, odometry(t_us, 1, 1, 2.0, 2.0, -5.0, [1, 0, 0, 0], 0, 0, 0, 0, 0, 0, _cov(HUGE), _cov(HUGE), 0, 0, 100)),
+            # NaN and infinite positions, velocities and covariances
+            pack(141, odometry(t_us, 1, 1, NAN, INF, -5.0, [1, 0, 0, 0], INF, NAN, 0, 0, 0, 0, _cov(NAN), _cov(INF), 0, 0, 0)),
+            pack(142, mavlink2.MAVLink_local_position_ned_message(t_ms, 2.0, -INF, NAN, NAN, 0.0, INF)),
+            # the largest stamp there is (from well off the route: its track is real, and reset again and again)
+            pack(143, mavlink2.MAVLink_local_position_ned_message(0xFFFFFFFF, 2.0, -40.0, -5.0, 0.0, 0.0, 0.0)),
+        ]
+        angles = np.linspace(0.0, 2 * np.pi, len(RING_IDS), endpoint=False)
+        for sysid, a in zip(RING_IDS, angles):  # 100 ids on a 6 m ring round the route's middle, 0.2 m accurate
+            x, y = 2.0 + 6.0 * np.cos(a), 6.0 * np.sin(a)
+            out.append(pack(sysid, odometry(t_us, 1, 1, x, y, -5.0, [1, 0, 0, 0], 0, 0, 0, 0, 0, 0,
+                                            _cov(0.04), _cov(0.01), 0, 0, 100)))
+        return out
+
+    def _run(self) -> None:
+        t0 = time.monotonic()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            while not self.stop.is_set():
+                for packet in self._round(time.monotonic() - t0):
+                    s.sendto(packet, ("127.0.0.1", self.port))
+                    self.sent += 1
+                self.stop.wait(0.1)
+
+
+def test_that_hostile_obstacle_reports_neither_crash_fly_nor_slow_its_stream(tmp_path):
+    port, obstacle_port, sim_obstacle_port = free_udp_port(), free_udp_port(), free_udp_port()
+    sim = Simulator(load_scenario(SCENARIO), seed=0)
+    server = UdpServer(sim, [LinkAddress("api", 0, port), LinkAddress("obstacles", 0, sim_obstacle_port)], speed=1.0)
+    serve = threading.Thread(target=server.run, args=(60.0,), daemon=True)
+    tlog = tmp_path / "fly.tlog"
+    fly = subprocess.Popen(
+        [sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{port}", "--scenario", str(SCENARIO),
+         "--obstacles", f"udpin:127.0.0.1:{sim_obstacle_port}", "--obstacles", f"udpin:127.0.0.1:{obstacle_port}",
+         "--duration", "30", "--exit-after-goal", "1.0", "--tlog", str(tlog), "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    hostile = HostileSender(obstacle_port)
+    time.sleep(0.5)  # the companion's sockets are bound before mavsim sends
+    serve.start()
+    hostile.thread.start()
+    try:
+        out, err = fly.communicate(timeout=120)
+    finally:
+        hostile.stop.set()
+        if fly.poll() is None:
+            fly.kill()
+            fly.communicate()
+        server.stop()
+        serve.join(timeout=5)
+        hostile.thread.join(timeout=5)
+        server.close()
+    assert "Traceback" not in err, err[-3000:]
+    report = json.loads(out)
+    assert hostile.sent > 5000
+    assert any("ENGAGED" in text for _, text in report["events"]), report["events"]
+    assert report["goal_reached_companion_t_s"] is not None, (report["events"], report)
+    assert not sim.recorder.summary()["collided"]
+    # the refused reports are counted, per source and reason
+    rejected = report["obstacle_intake"]["rejected"]
+
+    def refused(sysid: int, reason: str) -> int:
+        return sum(n for k, n in rejected.items() if f" sys {sysid}: " in k and reason in k)
+
+    assert refused(140, "variances above") > 20, rejected             # 1e30 m^2
+    assert refused(141, "non-finite") > 20 and refused(142, "non-finite") > 20, rejected
+    # a stamp stuck at 0xFFFFFFFF: its reports are duplicates or restart its clock (the track is reset), counted
+    restarts = report["obstacle_intake"]["clock_restarts"]
+    assert refused(143, "") + sum(n for k, n in restarts.items() if k.endswith(" sys 143")) > 5, (rejected, restarts)
+    assert report["tracks"] >= 100 and report["tracks_unconstrained_max"] > 0  # the ring: tracked, K constrained
+    # every setpoint finite and bounded; the stream held its rate
+    setpoints = [(t, m) for t, m in read_tlog(tlog)
+                 if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.get_srcComponent() == 191]
+    v = np.array([[m.vx, m.vy, m.vz] for _, m in setpoints])
+    assert len(setpoints) > 100 and np.all(np.isfinite(v)) and np.abs(v).max() <= 2.0 + 1e-6
+    t = np.array([t for t, _ in setpoints])
+    rate = (len(t) - 1) / (t[-1] - t[0])
+    assert rate >= 19.0, f"stream rate {rate:.2f} Hz"
+    assert np.diff(t).max() < 0.3, f"largest setpoint gap {np.diff(t).max():.3f} s"

@@ -1,0 +1,36 @@
+"""Issue 14's real-time must-show with a crowd: ``companion demo SCENE --realtime --crowd 200``.
+
+mavsim and ``companion fly`` run as two processes over loopback UDP while 200 extra
+systems report ODOMETRY at 1 Hz from 6-10 m beside the route to the companion's obstacle
+port. The setpoint stream must hold 20 Hz with no gap over 150 ms, OFFBOARD must hold
+until the goal, nothing may collide, and the crowd must really be tracked. 60-100 s of wall
+time per scene: marked slow. On a machine loaded beyond its cores this can fail on
+the planner's side (plans seconds late); docs/REALTIME.md gives the measured runs.
+
+Run: ``.venv/bin/pytest -m slow tests/loop/test_realtime_crowd.py``
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from companion.cli import main
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene", ["antipodal", "corridor"])
+def test_that_the_stream_holds_20_hz_and_the_flight_is_safe_with_200_extra_obstacle_systems(scene, capsys):
+    assert main(["demo", scene, "--realtime", "--crowd", "200", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    events = [text for _, text in summary.get("events", [])]
+    assert any("ENGAGED" in t for t in events), summary.get("fly_error") or events
+    assert summary["crowd_reports_sent"] > 2000
+    assert summary["tracks"] >= 200 and summary["tracks_unconstrained_max"] > 0  # the crowd was tracked
+    # OFFBOARD held to the goal: the companion reached it and handed back in Hold, never lost it first
+    assert summary["goal_reached"] is True and summary["collided"] is False, (summary.get("min_true_clearance_m"), events)
+    lost = [t for t in events if t.startswith(("PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP"))]
+    assert not lost, lost
+    assert summary["setpoint_rate_hz"] >= 19.5, summary["setpoint_rate_hz"]
+    assert summary["setpoint_gaps_over_150ms"] == 0, (summary["setpoint_gap_max_ms"], summary["tick_max_ms"])
