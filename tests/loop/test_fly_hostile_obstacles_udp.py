@@ -129,11 +129,13 @@ def test_that_hostile_obstacle_reports_neither_crash_fly_nor_slow_its_stream(tmp
     def refused(sysid: int, reason: str) -> int:
         return sum(n for k, n in rejected.items() if f" sys {sysid}: " in k and reason in k)
 
-    assert refused(140, "variances above") > 20, rejected             # 1e30 m^2
-    assert refused(141, "non-finite") > 20 and refused(142, "non-finite") > 20, rejected
+    # (an overloaded stream handles only the newest waiting report of a source: the rest are superseded, counted)
+    assert report["obstacle_reports_superseded"] > 1000
+    assert refused(140, "variances above") >= 5, rejected             # 1e30 m^2
+    assert refused(141, "non-finite") >= 5 and refused(142, "non-finite") >= 5, rejected
     # a stamp stuck at 0xFFFFFFFF: its reports are duplicates or restart its clock (the track is reset), counted
     restarts = report["obstacle_intake"]["clock_restarts"]
-    assert refused(143, "") + sum(n for k, n in restarts.items() if k.endswith(" sys 143")) > 5, (rejected, restarts)
+    assert refused(143, "") + sum(n for k, n in restarts.items() if k.endswith(" sys 143")) >= 3, (rejected, restarts)
     assert report["tracks"] >= 100 and report["tracks_unconstrained_max"] > 0  # the ring: tracked, K constrained
     # every setpoint finite and bounded; the stream held its rate
     setpoints = [(t, m) for t, m in read_tlog(tlog)
@@ -143,4 +145,5 @@ def test_that_hostile_obstacle_reports_neither_crash_fly_nor_slow_its_stream(tmp
     t = np.array([t for t, _ in setpoints])
     rate = (len(t) - 1) / (t[-1] - t[0])
     assert rate >= 19.0, f"stream rate {rate:.2f} Hz"
-    assert np.diff(t).max() < 0.3, f"largest setpoint gap {np.diff(t).max():.3f} s"
+    # (no gap near PX4's 1.3 s offboard loss; the 150 ms must-show is tests/loop/test_realtime_crowd.py, slow)
+    assert np.diff(t).max() < 0.5, f"largest setpoint gap {np.diff(t).max():.3f} s"
