@@ -15,6 +15,9 @@ max_plan_age_s`` (see :mod:`companion.loop.executor`).
 If the stream thread falls behind, ticks are not bunched up: the schedule restarts from
 now, as a late setpoint is better than a burst of stale ones. Every setpoint's send time
 is measured (:class:`StreamStats`: rate and the largest gap).
+
+(Just over 400 lines: the stream loop, the planning process it feeds and what both measure
+are one mechanism; the obstacle backlog is its own module, :mod:`companion.loop.backlog`.)
 """
 
 from __future__ import annotations
