@@ -4,10 +4,10 @@ mavsim and ``companion fly`` run as two processes over loopback UDP while 200 ex
 systems report ODOMETRY at 1 Hz from 6-10 m beside the route to the companion's obstacle
 port. The setpoint stream must hold 20 Hz with no gap over 150 ms, OFFBOARD must hold
 until the goal, nothing may collide, and the crowd must really be tracked. 60-100 s of wall
-time per scene: marked slow. On a machine loaded beyond its cores this can fail on
-the planner's side (plans seconds late); docs/REALTIME.md gives the measured runs.
+time per scene: marked realtime (``make realtime-test``). On a machine loaded beyond its cores
+this can fail on the planner's side (plans seconds late); docs/REALTIME.md gives the measured runs.
 
-Run: ``.venv/bin/pytest -m slow tests/loop/test_realtime_crowd.py``
+Run: ``.venv/bin/pytest -m realtime tests/loop/test_realtime_crowd.py``
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import pytest
 from companion.cli import main
 
 
-@pytest.mark.slow
+@pytest.mark.realtime
 @pytest.mark.parametrize("scene", ["antipodal", "corridor"])
 def test_that_the_stream_holds_20_hz_and_the_flight_is_safe_with_200_extra_obstacle_systems(scene, capsys):
     assert main(["demo", scene, "--realtime", "--crowd", "200", "--json"]) == 0
