@@ -287,6 +287,8 @@ class StreamStats:
             "setpoints": self.setpoints,
             "setpoint_rate_hz": round((self.setpoints - 1) / span, 2) if span > 0 else None,
             "setpoint_gap_max_ms": round(max(gaps) * 1e3, 1) if gaps else None,
+            # when the largest gap ended, seconds after the first setpoint
+            "setpoint_gap_max_at_s": round(sum(gaps[: gaps.index(max(gaps)) + 1]), 2) if gaps else None,
             "setpoint_gaps_over_150ms": sum(g > gap_limit_s for g in gaps),
             "tick_max_ms": round(self.max_tick_s * 1e3, 1),
             "inbound_dropped": self.inbound_dropped,
