@@ -33,6 +33,7 @@ from companion.core.planner import Planner, PlannerConfig
 from companion.loop.app import Companion
 from companion.loop.planning import PlanResult
 from companion.loop.request_builder import ReplanJob
+from companion.loop.tlog_marks import TlogMarks
 from companion.mavlink.link import Link
 from companion.mavlink.tlog import TlogWriter
 
@@ -296,6 +297,9 @@ def run_realtime(
     tlog : record every message handled and every packet sent.
     obstacle_links : receive-only links carrying traffic (their messages reach the companion
         tagged with the link's name, in the obstacle queue; nothing is ever sent on them).
+
+    The tlog also gets the marks a replay needs (:mod:`companion.loop.tlog_marks`): each
+    tick's time, and the link of each message from an obstacle link.
     """
     if duration_s is not None and not (math.isfinite(duration_s) and duration_s >= 0.0):
         raise ValueError(f"duration_s must be finite seconds >= 0, got {duration_s!r}")
@@ -304,9 +308,12 @@ def run_realtime(
     vehicle: deque = deque()
     others: deque = deque()
 
+    marks = TlogMarks(tlog, link.key) if tlog is not None else None
+
     def handle(rx) -> None:
         companion.handle(rx)
         if tlog is not None:
+            marks.received(rx.t_s, rx.link)
             tlog.write(rx.t_s, rx.raw)
 
     start = clock()
@@ -333,6 +340,8 @@ def run_realtime(
             handled += 1
         now = clock()
         if now >= next_tick:
+            if marks is not None:
+                marks.tick(now)
             outbox = companion.tick(now)
             for msg in outbox:
                 packet = link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times

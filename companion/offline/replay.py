@@ -81,6 +81,8 @@ from companion.loop.config import load_scenario
 from companion.mavlink.tlog import read_tlog
 from companion.offline.harness import LOCKSTEP_EPOCH_S
 from companion.loop.obstacles import replay_link
+from companion.loop.tlog_marks import TICK, link_name, mark_of
+from companion.loop.traffic_config import AUTOPILOT_LINK
 
 logger = logging.getLogger(__name__)
 
@@ -197,6 +199,12 @@ class _Rec:
     t_us: int  # link time, integer microseconds
     msg: object
     raw: bytes
+    link: str | None = None  # the link it came on, when the recording marked it (else inferred)
+
+
+@dataclass
+class _TickMark:
+    t_us: int  # a tick the recording marked (companion.loop.tlog_marks.TICK)
 
 
 @dataclass
@@ -300,11 +308,21 @@ def replay(
     key = tuple(int(k) for k in companion_key)
     stream: list[tuple[bool, _Rec]] = []
     n_in = n_out = 0
+    next_link: str | None = None
     for t_s, msg in records:
         raw = bytes(msg.get_msgbuf())
         # mavutil stores stamp_us * 1e-6; rounding back recovers the integer exactly.
         rec = _Rec(int(round(t_s * _US)) - offset_us, _reparse(parser, raw, msg), raw)
         out = messages.source_key(rec.msg) == key
+        mark = mark_of(rec.msg) if out else None
+        if mark is not None:  # the recording's own notes (tlog_marks), never sent: a tick, or the next record's link
+            if mark[0] == TICK:
+                stream.append((True, _TickMark(rec.t_us)))
+            else:
+                next_link = link_name(mark[1])
+            continue
+        if not out:
+            rec.link, next_link = next_link, None
         n_out += out
         n_in += not out
         stream.append((out, rec))
@@ -317,14 +335,17 @@ def replay(
         )
 
     period_us = int(round(_US / scenario.loop.setpoint_rate_hz))  # as the harness advances mavsim: round(dt * 1e6)
-    events = _schedule(stream, period_us)
+    marked = any(isinstance(rec, _TickMark) for _, rec in stream)
+    events = _marked_schedule(stream) if marked else _schedule(stream, period_us)
     recorded_ticks = sum(1 for ev in events if isinstance(ev, _Tick) and not ev.silent)
     commands_recorded = sum(1 for ev in events if isinstance(ev, _Tick) and ev.setpoint is not None)
     mode = "compare" if commands_recorded else "what-if"
     if assume_engaged is None:
         assume_engaged = mode == "what-if"
     notes = []
-    if mode == "compare" and not lockstep:
+    if marked:
+        notes.append("ticks and links as the recording marked them (companion.loop.tlog_marks)")
+    elif mode == "compare" and not lockstep:
         notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
 
     realtime_plans = any(arrivals(ev.recorded) for ev in events if isinstance(ev, _Tick))
@@ -341,7 +362,8 @@ def replay(
     unmatched = mismatches = ticks = 0
     for ev in events:
         if isinstance(ev, _Rec):
-            companion.handle(Received(ev.t_us * 1e-6, ev.msg, ev.raw, replay_link(ev.msg, companion.autopilot)))
+            link = (ev.link or AUTOPILOT_LINK) if marked else replay_link(ev.msg, companion.autopilot)
+            companion.handle(Received(ev.t_us * 1e-6, ev.msg, ev.raw, link))
             continue
         t = ev.t_us * 1e-6
         if schedule is not None:
@@ -353,6 +375,8 @@ def replay(
             if mode == "compare":  # the recorded companion sent nothing at this tick
                 mismatches += bool(out)
                 unmatched += sp is not None
+                if out:
+                    logger.debug("silent tick at %.6f s: replayed %s", t, [m.get_type() for m in out])
         elif [m.get_type() for m in out] != [m.get_type() for m in ev.recorded]:
             mismatches += 1
             logger.debug("tick at %.6f s: replayed %s, recorded %s", t, [m.get_type() for m in out],
@@ -409,6 +433,28 @@ def replay(
         path, mode, result.messages, ticks, result.replans, result.commands_compared, max_diff,
     )
     return result
+
+
+def _marked_schedule(stream: list) -> list:
+    """Inbound records and ticks of a log with tick marks: exactly in the recorded order.
+
+    Each tick mark opens a tick; the outbound records after it (up to the next mark or
+    inbound record) are what that tick sent, none for a tick that sent nothing.
+    """
+    events: list = []
+    cur: _Tick | None = None
+    for out, rec in stream:
+        if isinstance(rec, _TickMark):
+            cur = _Tick(rec.t_us)
+            events.append(cur)
+        elif not out:
+            cur = None
+            events.append(rec)
+        elif cur is not None:
+            cur.recorded.append(rec.msg)
+        else:  # a packet outside a marked tick: keep it as a tick of its own (it is compared, so it shows)
+            events.append(_Tick(rec.t_us, [rec.msg]))
+    return events
 
 
 def _schedule(stream: list[tuple[bool, _Rec]], period_us: int) -> list:
