@@ -234,6 +234,7 @@ class StreamStats:
     setpoint_gaps_s: list = field(default_factory=list)
     max_tick_s: float = 0.0
     inbound_dropped: int = 0
+    inbound_superseded: int = 0
     inbound_backlog_at_end: int = 0
 
     def note_setpoint(self, t_s: float) -> None:
@@ -257,7 +258,31 @@ class StreamStats:
             "setpoint_gaps_over_150ms": sum(g > gap_limit_s for g in gaps),
             "tick_max_ms": round(self.max_tick_s * 1e3, 1),
             "inbound_dropped": self.inbound_dropped,
+            "inbound_superseded": self.inbound_superseded,
         }
+
+
+def _keep_newest_per_source(queue: deque) -> int:
+    """Drop every waiting message that a newer one of the same kind from the same source supersedes.
+
+    A source is (link, system, component) and a kind the message type; the survivors keep
+    their order. Returns how many were dropped. Run when the obstacle queue backs up: a
+    loop slowed by load (measured on PX4 SITL on a loaded 2-core machine: five obstacle
+    messages handled per loop, 30 arriving per second) would otherwise fall further and
+    further behind, and the tracks would be seconds old (the backlog reached 3 s).
+    """
+    seen: set = set()
+    keep: list = []
+    for rx in reversed(queue):
+        key = (rx.link, rx.msg.get_srcSystem(), rx.msg.get_srcComponent(), rx.msg.get_type())
+        if key not in seen:
+            seen.add(key)
+            keep.append(rx)
+    dropped = len(queue) - len(keep)
+    if dropped:
+        queue.clear()
+        queue.extend(reversed(keep))
+    return dropped
 
 
 def run_realtime(
@@ -280,9 +305,11 @@ def run_realtime(
     Inbound messages wait in two queues: the autopilot's (and every HEARTBEAT) and the
     rest (obstacle traffic). Each loop handles all of the first and as many of the rest as
     fit before the next tick is due (at least ``_MIN_OBSTACLE_MESSAGES``), so a flood of
-    obstacle reports delays neither the setpoints nor the drone's own estimate. Past
-    ``_MAX_BACKLOG`` waiting obstacle messages the oldest are dropped and counted
-    (``StreamStats.inbound_dropped``). The tlog is written here, in the order the
+    obstacle reports delays neither the setpoints nor the drone's own estimate. When more
+    than that wait, only the newest message of each kind from each source is kept (the
+    others counted in ``StreamStats.inbound_superseded``), so the tracks never lag behind
+    a loop slowed by load; past ``_MAX_BACKLOG`` waiting obstacle messages the oldest are
+    dropped and counted (``StreamStats.inbound_dropped``). The tlog is written here, in the order the
     companion handled the messages (each stamped with its arrival), so a replay feeds
     them in that order and reproduces the commands; open the link without a tlog.
 
@@ -328,6 +355,8 @@ def run_realtime(
             (vehicle if first else others).append(rx)
         for obstacle_link in obstacle_links:  # obstacle traffic only: never ahead of the autopilot
             others.extend(obstacle_link.poll())
+        if len(others) > _MIN_OBSTACLE_MESSAGES:  # falling behind: only each source's newest report is news
+            stats.inbound_superseded += _keep_newest_per_source(others)
         while len(others) > _MAX_BACKLOG:
             others.popleft()
             stats.inbound_dropped += 1

@@ -23,6 +23,14 @@ setpoint: a streaming companion sends one every tick, so a wider gap there is a 
 ran late in real time) and after the last one up to the end of the log, each after the
 inbound records stamped up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
 
+*Marked* (a log from ``companion fly``, whose real-time loop marks its tlog, see
+:mod:`companion.loop.tlog_marks`). Every tick is marked, those that sent nothing too, and
+every message that came on an obstacle link is marked with that link: the replay ticks
+exactly where the recording did and feeds each message on its own link, inferring
+nothing. Older logs without marks are replayed by the rules above; a real-time one then
+agrees only as far as its silent ticks fall on the grid (the loop's jitter moves them)
+and its links are guessed right (:func:`companion.loop.obstacles.replay_link`).
+
 *What-if* (no companion packets: mavsim's own ``--tlog``, a MAVProxy or QGroundControl
 log). The companion ticks at its setpoint rate over the log's duration, and since no
 vehicle in such a log ever accepted our OFFBOARD request, the offboard sequence is

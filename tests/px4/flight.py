@@ -34,6 +34,7 @@ logger = logging.getLogger(__name__)
 TAKEOFF_ALT_M = 5.0
 COMPANION_TIMEOUT_S = 150.0
 HOLD_WATCH_S = 4.0
+TAKEOFF_WINDOW_S = 0.5   # the takeoff height is the mean true height over this long before OFFBOARD
 OBSTACLE_PORT = 14601  # the companion's receive-only obstacle link (`fly --obstacles`)
 AUTO, LOITER = 4, 3
 
@@ -89,9 +90,15 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
         result["ok"] = False
         result["why"] = "never in OFFBOARD" if truth_t.size else "no ground truth received"
         return result
-    # takeoff: true height when OFFBOARD was engaged (after AUTO.TAKEOFF -> AUTO.LOITER)
-    i_off = int(np.searchsorted(truth_t, obs.offboard_t))
-    result["takeoff_height_m"] = float(-truth_p[min(i_off, truth_t.size - 1), 2])
+    # takeoff: the height the vehicle holds after the takeoff, as SIH's truth has it: the mean
+    # true height over the last TAKEOFF_WINDOW_S before OFFBOARD (the companion leaves PX4 in
+    # Hold for [offboard] takeoff_settle_s after AUTO.TAKEOFF ends), and PX4's own estimate then
+    window = (truth_t >= obs.offboard_t - TAKEOFF_WINDOW_S) & (truth_t <= obs.offboard_t)
+    result["takeoff_height_m"] = round(float(-truth_p[window, 2].mean()), 3) if window.any() else None
+    est_t = np.array([t for t, _ in obs.estimate])
+    est_p = np.array([p for _, p in obs.estimate]).reshape(-1, 3)
+    est_window = (est_t >= obs.offboard_t - TAKEOFF_WINDOW_S) & (est_t <= obs.offboard_t)
+    result["takeoff_height_px4_estimate_m"] = round(float(-est_p[est_window, 2].mean()), 3) if est_window.any() else None
     # collisions in truth: obstacles' true positions at the truth sample times
     moving = truth_t - obs.offboard_t
     clear = []
