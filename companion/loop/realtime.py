@@ -37,6 +37,7 @@ from companion.loop.app import Companion
 from companion.loop.backlog import ObstacleBacklog
 from companion.loop.planning import PlanResult
 from companion.loop.request_builder import ReplanJob
+from companion.loop.tlog_marks import TlogMarks
 from companion.mavlink.link import Link
 from companion.mavlink.tlog import TlogWriter
 
@@ -264,7 +265,7 @@ class StreamStats:
     max_tick_s: float = 0.0
     inbound_dropped: int = 0
     inbound_backlog_at_end: int = 0
-    obstacle_superseded: int = 0
+    inbound_superseded: int = 0
     obstacle_handling_s: float = 0.0
     obstacles_handled_max: int = 0
     cpu_s: float = 0.0
@@ -292,7 +293,7 @@ class StreamStats:
             "setpoint_gaps_over_150ms": sum(g > gap_limit_s for g in gaps),
             "tick_max_ms": round(self.max_tick_s * 1e3, 1),
             "inbound_dropped": self.inbound_dropped,
-            "obstacle_reports_superseded": self.obstacle_superseded,
+            "inbound_superseded": self.inbound_superseded,
             "obstacle_handling_share": round(self.obstacle_handling_s / self.wall_s, 3) if self.wall_s > 0 else None,
             "stream_cpu_share": round(self.cpu_s / self.wall_s, 3) if self.wall_s > 0 else None,
         }
@@ -324,7 +325,7 @@ def run_realtime(
     source, so an overloaded stream fuses every obstacle's freshest report in turn and
     neither the setpoints nor the drone's own estimate ever wait for obstacle reports.
     Reports replaced by a newer one or pushed out of the backlog are counted
-    (``StreamStats.obstacle_superseded``, ``inbound_dropped``). The tlog is written
+    (``StreamStats.inbound_superseded``, ``inbound_dropped``). The tlog is written
     here, in the order the companion handled the messages (each stamped with its
     arrival), so a replay feeds them in that order and reproduces the commands; open
     the link without a tlog.
@@ -342,6 +343,9 @@ def run_realtime(
         tagged with the link's name, in the obstacle backlog; nothing is ever sent on them).
     obstacle_share : fraction of each setpoint period (0, 1] the stream may spend handling
         obstacle traffic (measured on ``clock``).
+
+    The tlog also gets the marks a replay needs (:mod:`companion.loop.tlog_marks`): each
+    tick's time, and the link of each message from an obstacle link.
     """
     if duration_s is not None and not (math.isfinite(duration_s) and duration_s >= 0.0):
         raise ValueError(f"duration_s must be finite seconds >= 0, got {duration_s!r}")
@@ -351,9 +355,12 @@ def run_realtime(
     stats = StreamStats()
     others = ObstacleBacklog(_MAX_BACKLOG)
 
+    marks = TlogMarks(tlog, link.key) if tlog is not None else None
+
     def handle(rx) -> None:
         companion.handle(rx)
         if tlog is not None:
+            marks.received(rx.t_s, rx.link)
             tlog.write(rx.t_s, rx.raw)
 
     start, cpu_start = clock(), time.process_time()
@@ -377,6 +384,8 @@ def run_realtime(
         now = clock()
         if now >= next_tick:
             companion.on_signatures_rejected(_signatures_rejected((link, *obstacle_links)))
+            if marks is not None:
+                marks.tick(now)
             outbox = companion.tick(now)
             for msg in outbox:
                 packet = link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times
@@ -407,5 +416,5 @@ def run_realtime(
     stats.cpu_s = time.process_time() - cpu_start
     stats.inbound_backlog_at_end = len(others)
     stats.inbound_dropped = others.dropped
-    stats.obstacle_superseded = others.superseded
+    stats.inbound_superseded = others.superseded
     return stats

@@ -133,7 +133,7 @@ def test_that_hostile_obstacle_reports_neither_crash_fly_nor_slow_its_stream(tmp
         return sum(n for k, n in rejected.items() if f" sys {sysid}: " in k and reason in k)
 
     # (an overloaded stream handles only the newest waiting report of a source: the rest are superseded, counted)
-    assert report["obstacle_reports_superseded"] > 1000
+    assert report["inbound_superseded"] > 1000
     assert refused(140, "variances above") >= 5, rejected             # 1e30 m^2
     assert refused(141, "non-finite") >= 5 and refused(142, "non-finite") >= 5, rejected
     # a stamp stuck at 0xFFFFFFFF: its reports are duplicates or restart its clock (the track is reset), counted
