@@ -41,11 +41,13 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
+from companion.core import minmax_kernel
 from companion.core import small_matrix as K
 from companion.errors import InputError
 
@@ -151,8 +153,8 @@ def _require_pd(ok: NDArray[np.bool_], name: str) -> None:
         raise InputError(f"{name} is not positive definite{where}")
 
 
-def _symmetrised_components(name: str, comp: Array) -> Array:
-    """Check a ``(d, d, n)`` component batch for symmetry and symmetrise it in place.
+def _symmetrised_components(name: str, comp: Array, check: bool = True) -> Array:
+    """Check a ``(d, d, n)`` component batch for symmetry (unless ``check`` is false) and symmetrise it.
 
     ``0.5 (a + a')`` per off-diagonal pair; the diagonal is left as it is (``0.5 (a + a)``
     is ``a`` exactly).
@@ -162,11 +164,10 @@ def _symmetrised_components(name: str, comp: Array) -> Array:
         return comp
     if comp.base is not None or not comp.flags.writeable:    # a view of the caller's array: copy first
         comp = comp.copy()
-    scale = np.max(np.abs(comp), axis=(0, 1))
     iu, ju = np.triu_indices(d, 1)
     upper, lower = comp[iu, ju], comp[ju, iu]
-    asym = np.abs(upper - lower)
-    if np.any(asym > 1e-9 * scale + 1e-300):
+    asym = np.abs(upper - lower) if check else None
+    if check and np.any(asym > 1e-9 * np.max(np.abs(comp), axis=(0, 1)) + 1e-300):
         raise InputError(f"{name} is not symmetric (largest asymmetry {float(np.max(asym)):.3g})")
     mean = 0.5 * (upper + lower)
     comp[iu, ju] = mean
@@ -193,8 +194,21 @@ class CovariancePairs:
     s2: Array
 
     @classmethod
-    def from_arrays(cls, cov1: ArrayLike, cov2: ArrayLike, lead: tuple[int, ...] | None = None) -> CovariancePairs:
-        """Validate ``cov1``, ``cov2`` (..., d, d), broadcast to ``lead`` (default: their common leading shape)."""
+    def from_arrays(cls, cov1: ArrayLike, cov2: ArrayLike, lead: tuple[int, ...] | None = None,
+                    *, validated: bool = False) -> CovariancePairs:
+        """Validate ``cov1``, ``cov2`` (..., d, d), broadcast to ``lead`` (default: their common leading shape).
+
+        ``validated=True``: the caller has already checked finiteness, symmetry (to 1e-9
+        relative) and positive definiteness (as :class:`~companion.core.planner.PlanRequest`
+        does on construction); the pairs are then only laid out and symmetrised.
+        """
+        if validated:
+            c1, c2 = np.asarray(cov1, dtype=float), np.asarray(cov2, dtype=float)
+            d = c1.shape[-1]
+            lead = np.broadcast_shapes(c1.shape[:-2], c2.shape[:-2]) if lead is None else lead
+            s1, s2 = (_symmetrised_components(name, K.matrices_to_components(np.broadcast_to(arr, lead + (d, d))),
+                                              check=False) for name, arr in (("cov1", c1), ("cov2", c2)))
+            return cls(lead=tuple(lead), s1=s1, s2=s2)
         c1, c2 = _checked("cov1", cov1, 2), _checked("cov2", cov2, 2)
         d = c1.shape[-1]
         for name, arr in (("cov1", c1), ("cov2", c2)):
@@ -279,13 +293,22 @@ class MinmaxResult:
     eta: Array
     alpha: Array
     beta: Array
-    overlap: Array
-    confidence: Array
     normal: Array
     s1: Array
     s2: Array
     eta_grad_mu1: Array
     residual: Array
+
+    # computed on first use: the planner's rows and rechecks need only eta, normal, s1, s2
+    @cached_property
+    def overlap(self) -> Array:
+        """``Y = 2 (1 - Phi(eta))``."""
+        return 2.0 * special.ndtr(-self.eta)
+
+    @cached_property
+    def confidence(self) -> Array:
+        """Contour of touch ``F_chi2_d(eta^2)``."""
+        return special.gammainc(self.alpha.shape[-1] / 2.0, 0.5 * self.eta * self.eta)
 
 
 def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> MinmaxResult:
@@ -313,8 +336,13 @@ def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> 
     return _minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead)
 
 
-def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...]) -> MinmaxResult:
-    """:func:`minmax` on validated batch-last inputs: means (d, n), covariances (d, d, n)."""
+def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...],
+            compiled: bool = minmax_kernel.COMPILED) -> MinmaxResult:
+    """:func:`minmax` on validated batch-last inputs: means (d, n), covariances (d, d, n).
+
+    ``compiled``: 3x3 pairs go through the compiled kernel (:mod:`companion.core.minmax_kernel`)
+    when numba is installed; ``False`` runs the vectorised numpy kernel (the tests compare them).
+    """
     d, n = m1.shape
     delta = m2 - m1
     scale = np.sqrt(np.maximum(sum(S1[i][i] for i in range(d)), sum(S2[i][i] for i in range(d))))
@@ -322,25 +350,25 @@ def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...]) -
     # Keep the iteration well-defined for coincident means; they are patched at the end.
     dv = np.where(coincident[None, :], np.eye(d)[:, :1] * scale[None, :], delta) if np.any(coincident) else delta
 
-    # Start at the geometric mean of the generalised eigenvalues of (S2, S1): exact when S2 = g S1.
-    u = 0.5 * (np.log(K.det(S2)) - np.log(K.det(S1))) / d
-    if d == 3 and isinstance(S1, np.ndarray):
-        u = _newton_polynomial(S1, S2, np.asarray(dv), u)
+    three = d == 3 and isinstance(S1, np.ndarray)
+    if three and compiled:    # the compiled per-pair loop: root, x = A(t)^-1 delta, q1, q2
+        t, lam, x, q1, q2 = minmax_kernel.root_and_solution(S1, S2, np.asarray(dv))
     else:
-        u = _newton_direct(S1, S2, dv, u)
-
-    t = np.exp(u)
-    lam = t / (1.0 + t)
-    if d == 3 and isinstance(S1, np.ndarray):    # whole-array adjugate: x = adj(A) delta / det(A)
-        a = t * S1 + S2
-        adj = K.adjugate3(a)
-        x = K.matvec(adj, np.asarray(dv)) / K.dots(a[0], adj[:, 0])
-        q1 = K.dots(x, K.matvec(S1, x))
-        q2 = K.dots(x, K.matvec(S2, x))
-    else:
-        x = np.array(K.mv(K.inv_sym(K.axpy(t, S1, S2)), dv))
-        q1 = K.dot(x, K.mv(S1, x))
-        q2 = K.dot(x, K.mv(S2, x))
+        # Start at the geometric mean of the generalised eigenvalues of (S2, S1): exact when S2 = g S1.
+        u = 0.5 * (np.log(K.det(S2)) - np.log(K.det(S1))) / d
+        u = _newton_polynomial(S1, S2, np.asarray(dv), u) if three else _newton_direct(S1, S2, dv, u)
+        t = np.exp(u)
+        lam = t / (1.0 + t)
+        if three:    # whole-array adjugate: x = adj(A) delta / det(A)
+            a = t * S1 + S2
+            adj = K.adjugate3(a)
+            x = K.matvec(adj, np.asarray(dv)) / K.dots(a[0], adj[:, 0])
+            q1 = K.dots(x, K.matvec(S1, x))
+            q2 = K.dots(x, K.matvec(S2, x))
+        else:
+            x = np.array(K.mv(K.inv_sym(K.axpy(t, S1, S2)), dv))
+            q1 = K.dot(x, K.mv(S1, x))
+            q2 = K.dot(x, K.mv(S2, x))
     eta1 = t * np.sqrt(q1)
     eta2 = np.sqrt(q2)
     eta = 0.5 * (eta1 + eta2)
@@ -368,8 +396,6 @@ def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...]) -
         eta=shaped(eta),
         alpha=shaped_vec(alpha),
         beta=shaped(beta),
-        overlap=shaped(2.0 * special.ndtr(-eta)),
-        confidence=shaped(special.gammainc(d / 2.0, 0.5 * eta * eta)),
         normal=shaped_vec(normal),
         s1=shaped(s1),
         s2=shaped(s2),
