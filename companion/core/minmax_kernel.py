@@ -57,8 +57,8 @@ def _minmax3(s1, s2, delta, u_tol, max_newton, t_out, lam, x_out, q1_out, q2_out
         det2 = aa * (dd * ff - ee * ee) + bb * (cc * ee - bb * ff) + cc * (bb * ee - cc * dd)
         u = 0.5 * (math.log(det2) - math.log(det1)) / 3.0
         lo, hi = -math.inf, math.inf
-        stalled[p] = 1
-        for _ in range(max_newton):
+        converged = False
+        for k in range(max_newton + 1):     # the last pass only evaluates x at the final u
             t = math.exp(u)
             g00, g01, g02 = t * a + aa, t * b + bb, t * c + cc
             g11, g12, g22 = t * d + dd, t * e + ee, t * f + ff
@@ -71,6 +71,8 @@ def _minmax3(s1, s2, delta, u_tol, max_newton, t_out, lam, x_out, q1_out, q2_out
             y0, y1, y2 = a * x0 + b * x1 + c * x2, b * x0 + d * x1 + e * x2, c * x0 + e * x1 + f * x2
             q1 = x0 * y0 + x1 * y1 + x2 * y2
             q2 = x0 * (aa * x0 + bb * x1 + cc * x2) + x1 * (bb * x0 + dd * x1 + ee * x2) + x2 * (cc * x0 + ee * x1 + ff * x2)
+            if converged or k == max_newton:
+                break
             w = (y0 * (c00 * y0 + c01 * y1 + c02 * y2) + y1 * (c01 * y0 + c11 * y1 + c12 * y2)
                  + y2 * (c02 * y0 + c12 * y1 + c22 * y2)) / det     # (S1x)' A^-1 (S1x)
             v = q1 - t * w
@@ -89,22 +91,9 @@ def _minmax3(s1, s2, delta, u_tol, max_newton, t_out, lam, x_out, q1_out, q2_out
                 slack = 1e-12 * (1.0 + abs(u))
                 if new_u < lo - slack or new_u > hi + slack:
                     new_u = 0.5 * (lo + hi)
-            done = abs(new_u - u) <= u_tol * max(1.0, abs(u))
+            converged = abs(new_u - u) <= u_tol * max(1.0, abs(u))
             u = new_u
-            if done:
-                stalled[p] = 0
-                break
-        t = math.exp(u)
-        g00, g01, g02 = t * a + aa, t * b + bb, t * c + cc
-        g11, g12, g22 = t * d + dd, t * e + ee, t * f + ff
-        c00, c01, c02 = g11 * g22 - g12 * g12, g02 * g12 - g01 * g22, g01 * g12 - g02 * g11
-        c11, c12, c22 = g00 * g22 - g02 * g02, g01 * g02 - g00 * g12, g00 * g11 - g01 * g01
-        det = g00 * c00 + g01 * c01 + g02 * c02
-        x0 = (c00 * dx + c01 * dy + c02 * dz) / det
-        x1 = (c01 * dx + c11 * dy + c12 * dz) / det
-        x2 = (c02 * dx + c12 * dy + c22 * dz) / det
-        q1 = x0 * (a * x0 + b * x1 + c * x2) + x1 * (b * x0 + d * x1 + e * x2) + x2 * (c * x0 + e * x1 + f * x2)
-        q2 = x0 * (aa * x0 + bb * x1 + cc * x2) + x1 * (bb * x0 + dd * x1 + ee * x2) + x2 * (cc * x0 + ee * x1 + ff * x2)
+        stalled[p] = 0 if converged else 1
         t_out[p] = t
         lam[p] = t / (1.0 + t)
         x_out[0, p], x_out[1, p], x_out[2, p] = x0, x1, x2
