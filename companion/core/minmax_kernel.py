@@ -12,8 +12,9 @@ calls of the vectorised kernel.
 Why numba (a runtime dependency): measured on the planner's batch (120 pairs) it is about
 18x faster than the vectorised numpy kernel and on 10,000 pairs about 4.5x
 (docs/PERFORMANCE.md); it installs from a wheel with no compile step at install. The
-function is compiled on first use and cached on disk (``cache=True``), so only the first
-process after an install pays the compilation. Without numba the numpy kernel runs
+module imports numba only on the first call, which compiles the function or loads it from
+its disk cache (``cache=True``): only the first process after an install (or a change of
+this file) pays the compilation; every planning process pays the import and the load. Without numba the numpy kernel runs
 (:data:`COMPILED` is then False); the tests compare the two.
 
 Inputs are validated by the caller (:class:`companion.core.overlap.CovariancePairs`).
@@ -21,6 +22,8 @@ Inputs are validated by the caller (:class:`companion.core.overlap.CovariancePai
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import logging
 import math
 
@@ -28,13 +31,9 @@ import numpy as np
 
 logger = logging.getLogger(__name__)
 
-try:  # pragma: no cover - exercised by whichever environment runs the tests
-    import numba
-
-    COMPILED = True
-except ImportError:  # pragma: no cover
-    numba = None
-    COMPILED = False
+#: Whether numba is installed (then 3x3 pairs use the compiled kernel). numba itself is
+#: imported, and the kernel compiled or loaded from its cache, on first use only.
+COMPILED = importlib.util.find_spec("numba") is not None
 
 #: Newton stops once a step in ``u`` is below this (relative to max(1, |u|)); as in overlap.
 U_TOL = 1e-10
@@ -100,8 +99,12 @@ def _minmax3(s1, s2, delta, u_tol, max_newton, t_out, lam, x_out, q1_out, q2_out
         q1_out[p], q2_out[p] = q1, q2
 
 
-if COMPILED:
-    _minmax3_compiled = numba.njit(cache=True, nogil=True)(_minmax3)
+@functools.cache
+def _compiled():
+    """The numba-compiled :func:`_minmax3` (compiled, or loaded from the disk cache, on first call)."""
+    import numba
+
+    return numba.njit(cache=True, nogil=True)(_minmax3)
 
 
 def root_and_solution(s1: np.ndarray, s2: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -118,8 +121,19 @@ def root_and_solution(s1: np.ndarray, s2: np.ndarray, delta: np.ndarray) -> tupl
     t, lam = np.empty(n), np.empty(n)
     x, q1, q2 = np.empty((3, n)), np.empty(n), np.empty(n)
     stalled = np.zeros(n, dtype=np.int8)
-    _minmax3_compiled(np.ascontiguousarray(s1), np.ascontiguousarray(s2), np.ascontiguousarray(delta),
+    _compiled()(np.ascontiguousarray(s1), np.ascontiguousarray(s2), np.ascontiguousarray(delta),
                       U_TOL, MAX_NEWTON, t, lam, x, q1, q2, stalled)
     if stalled.any():
         logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", MAX_NEWTON, int(stalled.sum()))
     return t, lam, x, q1, q2
+
+
+def warm_up() -> None:
+    """Compile (or load from the disk cache) the kernel now, on one pair.
+
+    The planning process calls this before it says it is ready, so that the first replan
+    of a flight does not pay the compilation (seconds on a fresh install).
+    """
+    if COMPILED:
+        eye = np.eye(3)[:, :, None].copy()
+        root_and_solution(eye, 2.0 * eye, np.array([[1.0], [0.0], [0.0]]))
