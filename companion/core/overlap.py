@@ -47,7 +47,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
-from companion.core import minmax_kernel
 from companion.core import small_matrix as K
 from companion.errors import InputError
 
@@ -336,13 +335,8 @@ def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> 
     return _minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead)
 
 
-def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...],
-            compiled: bool = minmax_kernel.COMPILED) -> MinmaxResult:
-    """:func:`minmax` on validated batch-last inputs: means (d, n), covariances (d, d, n).
-
-    ``compiled``: 3x3 pairs go through the compiled kernel (:mod:`companion.core.minmax_kernel`)
-    when numba is installed; ``False`` runs the vectorised numpy kernel (the tests compare them).
-    """
+def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...]) -> MinmaxResult:
+    """:func:`minmax` on validated batch-last inputs: means (d, n), covariances (d, d, n)."""
     d, n = m1.shape
     delta = m2 - m1
     scale = np.sqrt(np.maximum(sum(S1[i][i] for i in range(d)), sum(S2[i][i] for i in range(d))))
@@ -351,24 +345,21 @@ def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...],
     dv = np.where(coincident[None, :], np.eye(d)[:, :1] * scale[None, :], delta) if np.any(coincident) else delta
 
     three = d == 3 and isinstance(S1, np.ndarray)
-    if three and compiled:    # the compiled per-pair loop: root, x = A(t)^-1 delta, q1, q2
-        t, lam, x, q1, q2 = minmax_kernel.root_and_solution(S1, S2, np.asarray(dv))
+    # Start at the geometric mean of the generalised eigenvalues of (S2, S1): exact when S2 = g S1.
+    u = 0.5 * (np.log(K.det(S2)) - np.log(K.det(S1))) / d
+    u = _newton_polynomial(S1, S2, np.asarray(dv), u) if three else _newton_direct(S1, S2, dv, u)
+    t = np.exp(u)
+    lam = t / (1.0 + t)
+    if three:    # whole-array adjugate: x = adj(A) delta / det(A)
+        a = t * S1 + S2
+        adj = K.adjugate3(a)
+        x = K.matvec(adj, np.asarray(dv)) / K.dots(a[0], adj[:, 0])
+        q1 = K.dots(x, K.matvec(S1, x))
+        q2 = K.dots(x, K.matvec(S2, x))
     else:
-        # Start at the geometric mean of the generalised eigenvalues of (S2, S1): exact when S2 = g S1.
-        u = 0.5 * (np.log(K.det(S2)) - np.log(K.det(S1))) / d
-        u = _newton_polynomial(S1, S2, np.asarray(dv), u) if three else _newton_direct(S1, S2, dv, u)
-        t = np.exp(u)
-        lam = t / (1.0 + t)
-        if three:    # whole-array adjugate: x = adj(A) delta / det(A)
-            a = t * S1 + S2
-            adj = K.adjugate3(a)
-            x = K.matvec(adj, np.asarray(dv)) / K.dots(a[0], adj[:, 0])
-            q1 = K.dots(x, K.matvec(S1, x))
-            q2 = K.dots(x, K.matvec(S2, x))
-        else:
-            x = np.array(K.mv(K.inv_sym(K.axpy(t, S1, S2)), dv))
-            q1 = K.dot(x, K.mv(S1, x))
-            q2 = K.dot(x, K.mv(S2, x))
+        x = np.array(K.mv(K.inv_sym(K.axpy(t, S1, S2)), dv))
+        q1 = K.dot(x, K.mv(S1, x))
+        q2 = K.dot(x, K.mv(S2, x))
     eta1 = t * np.sqrt(q1)
     eta2 = np.sqrt(q2)
     eta = 0.5 * (eta1 + eta2)

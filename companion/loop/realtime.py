@@ -29,7 +29,6 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Callable
 
-from companion.core import minmax_kernel
 from companion.core.planner import Planner, PlannerConfig
 from companion.loop.app import Companion
 from companion.loop.planning import PlanResult
@@ -59,7 +58,6 @@ class WorkerStats:
 def _serve(conn: Connection, config: PlannerConfig, make_planner: Callable[[PlannerConfig], Planner]) -> None:
     """The planning process: solve each ``(seq, request, warm_start)`` received, send ``(seq, plan, error)``."""
     planner = make_planner(config)
-    minmax_kernel.warm_up()    # compile the overlap kernel before the first replan needs it
     conn.send("ready")
     while True:
         try:

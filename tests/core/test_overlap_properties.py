@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -117,27 +116,3 @@ def test_that_batch_results_equal_per_pair_results(seed, d):
         for field in ("alpha", "normal", "eta_grad_mu1"):
             np.testing.assert_allclose(getattr(batch, field)[i], getattr(single, field), rtol=1e-12, atol=1e-15, err_msg=field)
 
-
-@settings(max_examples=20, deadline=None, derandomize=True)
-@given(st.integers(0, 2**32 - 1))
-def test_that_the_compiled_kernel_agrees_with_the_numpy_kernel(seed):
-    from companion.core import minmax_kernel, overlap
-    import companion.core.small_matrix as K
-
-    if not minmax_kernel.COMPILED:
-        pytest.fail("numba is a runtime dependency: the compiled minmax kernel must be available")
-    rng = np.random.default_rng(seed)
-    n = 40
-    q = np.linalg.qr(rng.standard_normal((2 * n, 3, 3)))[0]
-    ev = 10.0 ** rng.uniform(-2, 2, (2 * n, 3))
-    covs = np.einsum("nij,nj,nkj->nik", q, ev, q)
-    mu1 = rng.standard_normal((n, 3))
-    mu2 = mu1 + rng.standard_normal((n, 3)) * rng.uniform(0.01, 5.0, (n, 1))
-    mu2[0] = mu1[0]  # coincident means take the same patched path in both
-    pairs = overlap.CovariancePairs.from_arrays(covs[:n], covs[n:])
-    m1, m2 = K.vectors_to_components(mu1), K.vectors_to_components(mu2)
-    fast = overlap._minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead, compiled=True)
-    slow = overlap._minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead, compiled=False)
-    for field in ("lam", "eta", "beta", "s1", "s2", "alpha", "normal", "eta_grad_mu1"):
-        np.testing.assert_allclose(getattr(fast, field), getattr(slow, field), rtol=1e-9, atol=1e-12, err_msg=field)
-    assert np.all(np.abs(fast.residual) <= 1e-10 * np.maximum(fast.eta, 1e-300) + 1e-15)
