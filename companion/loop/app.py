@@ -302,7 +302,10 @@ class Companion:
                     said.append(self._say(t_s, SEV_WARNING, f"companion: safety slack used ({plan.slack_max:.2f})"))
             self.executor.adopt(plan, job.t_vehicle_s, job.t_link_s, job.position)
         # Obstacles beyond sensing range were ignored by design: their contour says nothing.
-        ct_plan = np.asarray(plan.contour_of_touch)[np.asarray(plan.in_range, dtype=bool)]
+        in_range = np.asarray(plan.in_range, dtype=bool)
+        ct_plan = np.asarray(plan.contour_of_touch)[in_range]
+        planned_contour = {} if status is PlanStatus.FAILED else {
+            key: float(plan.contour_of_touch[i][0]) for i, key in enumerate(job.tracks_constrained) if in_range[i]}
         self.records.append(
             ReplanRecord(
                 t_link_s=job.t_link_s,
@@ -323,6 +326,7 @@ class Companion:
                 command=np.asarray(plan.commands[0]).copy() if status is not PlanStatus.FAILED else np.zeros(3),
                 t_applied_s=t_s,
                 tracks_unconstrained=len(job.tracks_unconstrained),
+                planned_contour=planned_contour,
             )
         )
         return said

@@ -104,11 +104,11 @@ def test_that_an_episode_is_drawn_from_its_seed_and_index_alone():
 def test_that_a_correlated_drone_error_is_opt_in_and_leaves_the_rest_of_the_episode_alone():
     white = generate_scenario("crossing", 5, 3)
     assert "position_noise_correlation_s" not in white["sim"]  # the default episode is the one of before
-    wandering = generate_scenario("crossing", 5, 3, drone_noise_correlation_s=2.0)
+    wandering = generate_scenario("crossing", 5, 3, noise_correlation_s=2.0)
     assert wandering["sim"].pop("position_noise_correlation_s") == 2.0 and wandering == white
-    assert mavsim_load_dict(generate_scenario("crossing", 5, 3, drone_noise_correlation_s=2.0)).sim.position_noise_correlation_s == 2.0
+    assert mavsim_load_dict(generate_scenario("crossing", 5, 3, noise_correlation_s=2.0)).sim.position_noise_correlation_s == 2.0
     with pytest.raises(SystemExit):
-        main(["campaign", "--drone-noise-correlation", "-1"])
+        main(["campaign", "--noise-correlation", "-1"])
 
 
 def test_that_unknown_family_and_method_are_rejected():

@@ -27,17 +27,17 @@ from companion.offline.campaign.results import EpisodeResult
 logger = logging.getLogger(__name__)
 
 FORMAT = "ogccmpc-campaign-results"
-VERSION = 3  # 2: slack violation fields in the rows; 3: promise bins
+VERSION = 4  # 2: slack violation fields in the rows; 3: promise bins; 4: the plan's promise bins, obstacle noise correlation
 #: A row longer than this is not one the campaign wrote (bounded reads of a file given on the command line).
 MAX_LINE_BYTES = 16 * 1024 * 1024
 
 
 def campaign_header(family: str, seed: int, c_min: float, duration_s: float,
-                    drone_noise_correlation_s: float = 0.0) -> dict[str, Any]:
+                    noise_correlation_s: float = 0.0) -> dict[str, Any]:
     """The header line: what every row of the file depends on."""
     return {"format": FORMAT, "version": VERSION, "family": family, "seed": int(seed),
             "c_min": float(c_min), "duration_s": float(duration_s),
-            "drone_noise_correlation_s": float(drone_noise_correlation_s)}
+            "noise_correlation_s": float(noise_correlation_s)}
 
 
 class ResultsFile:
