@@ -42,7 +42,6 @@ SEV_NOTICE = mavlink2.MAV_SEVERITY_NOTICE
 SEV_INFO = mavlink2.MAV_SEVERITY_INFO
 
 _HEARTBEAT_PERIOD_S = 1.0
-_SLACK_WARN_PERIOD_S = 2.0
 _UNCONSTRAINED_WARN_PERIOD_S = 5.0
 
 Outbox = list[mavlink2.MAVLink_message]
@@ -94,7 +93,6 @@ class Companion:
         self._replans_asked = 0
         self._last_replan_t: float | None = None
         self._last_hb_t: float | None = None
-        self._last_slack_warn = -math.inf
         self._last_unconstrained_warn = -math.inf
         self._plan_too_old = False  # braking for an old plan was announced
 
@@ -297,9 +295,10 @@ class Companion:
         else:
             if status is PlanStatus.SLACK:
                 self.state.slack_plans += 1
-                if t_s - self._last_slack_warn >= _SLACK_WARN_PERIOD_S:
-                    self._last_slack_warn = t_s
-                    said.append(self._say(t_s, SEV_WARNING, f"companion: safety slack used ({plan.slack_max:.2f})"))
+                # One short STATUSTEXT on every slack replan (issue 15): at most one per
+                # replan_period_s (3.3 Hz), about 60 bytes each, well within a telemetry link.
+                said.append(self._say(t_s, SEV_WARNING,
+                                      f"companion: safety slack used ({plan.slack_max:.2f}) #{self.state.slack_plans}"))
             self.executor.adopt(plan, job.t_vehicle_s, job.t_link_s, job.position)
         # Obstacles beyond sensing range were ignored by design: their contour says nothing.
         in_range = np.asarray(plan.in_range, dtype=bool)

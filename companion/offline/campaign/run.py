@@ -167,4 +167,5 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
             store.close()
     results = store.results(keys) if store is not None else [in_memory[k] for k in keys if k in in_memory]
     return CampaignResult(family, seed, episodes, methods, c_min, duration_s, tuple(results),
-                          summarise(results, methods, c_min), time.perf_counter() - t0, n_workers, lost)
+                          summarise(results, methods, c_min), time.perf_counter() - t0, n_workers, lost,
+                          noise_correlation_s)

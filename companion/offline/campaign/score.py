@@ -91,6 +91,21 @@ class EpisodeScore:
         return cls(**{k: v for k, v in row.items() if k in names})
 
 
+def _truth_one_step_later(replan_truth: list, step: float) -> list:
+    """For each replan, the truth at the replan ``step`` seconds later (``None`` when there was none)."""
+    out = []
+    for i, (t, _, _) in enumerate(replan_truth):
+        later = None
+        for j in range(i + 1, len(replan_truth)):
+            dt = replan_truth[j][0] - t
+            if abs(dt - step) < 1e-6:
+                later = replan_truth[j]
+            if dt > step + 1e-6:
+                break
+        out.append(later)
+    return out
+
+
 def score_run(run: Any, data: dict) -> EpisodeScore:
     """Per-episode metrics from a :class:`~companion.offline.harness.RunResult` and its scenario dict.
 
@@ -100,7 +115,9 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
     twice). An obstacle is *in range* at a step when its true centre distance is within
     sensing range; a *step collision* is an in-range obstacle whose true distance is below the
     sum of the physical radii. The realised contour of touch (from the estimates,
-    ``ReplanRecord.realised_contour``) is counted for tracked obstacles within range.
+    ``ReplanRecord.realised_contour``) is counted for tracked obstacles within range. The
+    plan's promise (``ReplanRecord.planned_contour``, its first step) is scored against the
+    truth at the replan ``step_s`` later (the time of that step), when there is one.
     """
     truth = run.truth
     comp = run.companion
@@ -124,8 +141,7 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
     rel_nees: list[float] = []
     model_err: list[float] = []
     estimates_promise, plan_promise = PromiseTally(), PromiseTally()
-    # truth one step after each replan: the next replan's, when it came step_s later
-    truth_next = [nxt if abs(nxt[0] - now[0] - step) < 1e-6 else None for now, nxt in zip(replan_truth, replan_truth[1:])] + [None]
+    truth_next = _truth_one_step_later(replan_truth, step)
     prev = None  # (t, true drone position, planned displacement over the first step)
     last_t = -math.inf
     for rec, (_, p_true, obs_true), after in zip(records, replan_truth, truth_next):
