@@ -96,21 +96,24 @@ def plot_campaign(summary: Mapping[str, Any], directory: str | Path, *, c_min: f
     return written
 
 
-def _reliability(summary: Mapping[str, Any], path: Path, title: str, bins_attr: str, ratio_attr: str) -> Path:
+def _reliability(summary: Mapping[Any, Any], path: Path, title: str, bins_attr: str, ratio_attr: str,
+                 label: Any = lambda key, s: str(key)) -> Path:
     """Promised collision probability per (step, obstacle) pair against the observed frequency.
 
     Log-log; per bin of promised probability, the observed frequency with its 95 %
     Clopper-Pearson interval; a bin with no hit is drawn at its upper limit (a downward
     triangle): the truth allows at most that. Points under the diagonal keep the promise.
-    Beside the axes, per method: pairs, hits, observed/promised and the mean NEES of the
-    drone's and the relative estimates (3 for consistent filters).
+    Beside the axes, per curve: pairs, hits, observed/promised and the mean NEES of the
+    drone's and the relative estimates (3 for consistent filters). ``summary`` maps a curve's
+    key (a method, or a ``c_min``) to its summary; ``label(key, summary)`` names the curve.
     """
     fig, (ax, side) = plt.subplots(1, 2, figsize=(8.6, 4.8), gridspec_kw={"width_ratios": [1.0, 0.55]})
     floor, top = 1e-7, 1.0
     markers = ("o", "s", "D", "^")
     n_methods = max(len(summary), 1)
     notes = []
-    for i, (m, s) in enumerate(summary.items()):
+    for i, (key, s) in enumerate(summary.items()):
+        m = label(key, s)
         bins = [b for b in getattr(s, bins_attr) if b.pairs > 0]
         color = f"C{i}"
         ratio = getattr(s, ratio_attr)
@@ -156,3 +159,29 @@ def _reliability(summary: Mapping[str, Any], path: Path, title: str, bins_attr: 
 
 def _num(x: float | None) -> str:
     return "-" if x is None else f"{x:.2f}"
+
+
+def plot_reliability_by_c_min(campaigns: Mapping[float, Mapping[str, Any]], directory: str | Path, *,
+                              title: str) -> list[Path]:
+    """One reliability diagram per method, one curve per ``c_min``: ``reliability_METHOD.png``.
+
+    Parameters
+    ----------
+    campaigns : ``{c_min: {method: summary}}`` (``MethodSummary``: ``plan_reliability``,
+        ``plan_observed_over_promised``, ``drone_nees_mean``, ``relative_nees_mean``,
+        ``episodes``); a method may be missing at some ``c_min``.
+    directory : output folder (created).
+    title : figure title prefix (family, seed, noise model).
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    methods = list(dict.fromkeys(m for per in campaigns.values() for m in per))
+    written = []
+    for method in methods:
+        per_c = {c: per[method] for c, per in sorted(campaigns.items()) if method in per}
+        path = directory / f"reliability_{method}.png"
+        _reliability(per_c, path, f"{title}\n{method}: the plan's promise (first step) against truth",
+                     "plan_reliability", "plan_observed_over_promised",
+                     label=lambda c, s: f"c_min {c:.2f} ({s.episodes} ep.)")
+        written.append(path)
+    return written

@@ -21,6 +21,7 @@ from companion.offline.campaign import (
     SPAWN_CLEARANCE_M,
     SPEED_MAX_MPS,
     EpisodeTask,
+    ResultsFile,
     clopper_pearson,
     collision_bound,
     episode_sim_seed,
@@ -266,11 +267,34 @@ def test_that_a_tiny_campaign_runs_and_reports_every_method(tiny_campaign, tmp_p
         assert sum(b.pairs for b in s.plan_reliability) > 0  # the plans' promises were scored
     table = format_table(res)
     assert "hyperplane" in table and "deterministic" in table and "Phi(-r_min)" in table
+    assert "hyperplane: plan's promise (first step) against truth over" in table
     doc = json.loads(json.dumps(res.to_json(), allow_nan=False))  # strict JSON: no inf/NaN
     assert doc["summary"]["hyperplane"]["episodes"] == 2 and len(doc["results"]) == 4
     written = res.plot(tmp_path / "fig")
-    assert [p.name for p in written] == ["collision_rate.png", "min_contour_ecdf.png", "reliability.png"]
+    assert [p.name for p in written] == ["collision_rate.png", "min_contour_ecdf.png", "reliability.png", "reliability_estimates.png"]
     assert all(p.stat().st_size > 1000 for p in written)
+
+
+def test_that_the_reliability_command_reads_results_files_and_draws_one_diagram_per_method(tiny_campaign, tmp_path, capsys):
+    from companion.offline.campaign.store import campaign_header
+
+    paths = []
+    for c_min in (0.9, 0.5):  # the same runs filed under two c_min: one curve each
+        path = tmp_path / f"c{c_min}.jsonl"
+        with ResultsFile(path, campaign_header("antipodal", 4, c_min, SHORT_S)) as store:
+            for row in tiny_campaign.results:
+                store.append(row)
+        paths.append(str(path))
+    assert main(["reliability", *paths, "--plot", str(tmp_path / "fig")]) == 0
+    out = capsys.readouterr().out
+    ratio = tiny_campaign.summary["hyperplane"].plan_observed_over_promised
+    assert "hyperplane      0.50    2" in out and "hyperplane      0.90    2" in out
+    assert (f"{ratio:15.3g}" if ratio is not None else "-") in out
+    assert sorted(p.name for p in (tmp_path / "fig").iterdir()) == ["reliability_deterministic.png", "reliability_hyperplane.png"]
+    assert main(["reliability", paths[0], paths[0]]) == 2  # one campaign per c_min
+    (tmp_path / "bad.jsonl").write_text("{}\n")
+    assert main(["reliability", str(tmp_path / "bad.jsonl")]) == 2
+    assert "bad.jsonl:1: not a campaign results file" in capsys.readouterr().err
 
 
 def test_that_rerunning_one_episode_by_index_gives_the_same_result(tiny_campaign):
