@@ -2,7 +2,8 @@
 
 Reads campaign results files (``companion campaign --results``; one campaign per file,
 typically one per ``c_min``), prints per method and ``c_min``: episodes, scored (step,
-obstacle) pairs, true overlaps, observed over promised for the plan's promise and the
+obstacle) pairs, true overlaps, the overlaps the plans promised at most (the sum of their
+``Phi(-r)``), observed over promised for the plan's promise and the
 estimates' promise, the bins whose 95 % Clopper-Pearson interval lies above their promise,
 and the mean NEES of the drone's and the relative estimates; ``--plot DIR`` draws one
 reliability diagram per method with one curve per ``c_min`` (``reliability_METHOD.png``).
@@ -46,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
         described.add((header.get("family"), header.get("seed"), header.get("noise_correlation_s", 0.0)))
         methods = [m for m in METHODS if any(r.method == m for r in rows)]
         campaigns[c_min] = summarise(rows, methods, c_min)
-    print(f"{'method':<14}{'c_min':>6}{'eps':>5}{'pairs':>8}{'hits':>6}{'plan obs/prom':>15}{'est obs/prom':>14}"
+    print(f"{'method':<14}{'c_min':>6}{'eps':>5}{'pairs':>8}{'hits':>6}{'promised':>10}{'plan obs/prom':>15}{'est obs/prom':>14}"
           f"{'NEES drone':>12}{'NEES rel':>10}  bins above their promise (plan)")
     for method in METHODS:
         for c_min, per in sorted(campaigns.items()):
@@ -56,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
             used = [b for b in s.plan_reliability if b.pairs]
             over = [f"[{b.lo:.0e}, {b.hi:.0e}): {b.hits}/{b.pairs}, 95 % [{b.observed_ci95[0]:.1e}, {b.observed_ci95[1]:.1e}] "
                     f"against {b.promised_mean:.1e}" for b in used if b.exceeds_promise]
-            print(f"{method:<14}{c_min:>6.2f}{s.episodes:>5}{sum(b.pairs for b in used):>8}{sum(b.hits for b in used):>6}"
+            promised = sum(b.promised_mean * b.pairs for b in used)  # expected overlaps if every promise were exact
+            print(f"{method:<14}{c_min:>6.2f}{s.episodes:>5}{sum(b.pairs for b in used):>8}{sum(b.hits for b in used):>6}{promised:>10.3g}"
                   f"{_fmt(s.plan_observed_over_promised, '15.3g')}{_fmt(s.observed_over_promised, '14.3g')}"
                   f"{_fmt(s.drone_nees_mean, '12.2f')}{_fmt(s.relative_nees_mean, '10.2f')}  {'; '.join(over) or 'none'}")
     if args.plot:
