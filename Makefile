@@ -5,7 +5,7 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 BSTAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench campaign campaign-test realtime-test px4-test venv clean
+.PHONY: demo test bench campaign reliability campaign-test realtime-test px4-test venv clean
 
 # PX4 SITL build with start-sih (see docs/PX4.md); `make px4-test` flies the companion against it.
 PX4_SITL_DIR ?= ../shared/px4-sitl
@@ -41,6 +41,22 @@ CAMPAIGN_ARGS ?= --family antipodal --episodes 200 --methods hyperplane,paper,de
 campaign: $(STAMP)
 	$(VENV)/bin/companion campaign $(CAMPAIGN_ARGS) $(if $(SCHEDULER),--scheduler $(SCHEDULER)) \
 		--results out/campaign.jsonl --resume --json out/campaign.json --plot out/campaign
+
+# Reliability diagrams (docs/CAMPAIGNS.md): hyperplane at c_min 0.5, 0.7 and 0.9, deterministic once
+# (it ignores c_min: the same flights at every c_min), with the honest noise model (drone and obstacle
+# errors Gauss-Markov, 60 s), one worker under nice; resumable (out/reliability/cXXX.jsonl).
+# The figures go to docs/figures/ (reliability_METHOD.png: one curve per c_min).
+RELIABILITY_EPISODES ?= 100
+RELIABILITY_ARGS ?= --family antipodal --seed 1 --noise-correlation 60 --workers 1 --episodes $(RELIABILITY_EPISODES) --progress log
+reliability: $(STAMP)
+	nice -n 10 $(VENV)/bin/companion campaign $(RELIABILITY_ARGS) --methods hyperplane,deterministic --c-min 0.5 \
+		--results out/reliability/c050.jsonl --resume --plot out/reliability/c050
+	nice -n 10 $(VENV)/bin/companion campaign $(RELIABILITY_ARGS) --methods hyperplane --c-min 0.7 \
+		--results out/reliability/c070.jsonl --resume --plot out/reliability/c070
+	nice -n 10 $(VENV)/bin/companion campaign $(RELIABILITY_ARGS) --methods hyperplane --c-min 0.9 \
+		--results out/reliability/c090.jsonl --resume --plot out/reliability/c090
+	$(VENV)/bin/companion reliability out/reliability/c050.jsonl out/reliability/c070.jsonl out/reliability/c090.jsonl \
+		--plot docs/figures
 
 campaign-test: $(STAMP)
 	$(VENV)/bin/pytest -q -m slow

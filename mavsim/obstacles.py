@@ -10,7 +10,10 @@ time (no integration error). Each obstacle is its own MAVLink system (system id
   MAV_TYPE_GENERIC (0), so autopilot discovery (pymavlink ``wait_heartbeat``
   target selection, MAVSDK, QGroundControl) never takes it for a vehicle, and
 - reports at ``report_rate_hz``: true position plus Gaussian noise of
-  ``measurement_cov_m2``; velocity (true plus noise of ``velocity_cov_m2ps2``) only if
+  ``measurement_cov_m2``, white or, with ``measurement_correlation_s`` > 0, Gauss-Markov
+  with that correlation time and the same covariance at every report (:mod:`mavsim.noise`;
+  what a tracker's or a GNSS receiver's error does), so the covariance reported stays the
+  error's true covariance either way; velocity (true plus noise of ``velocity_cov_m2ps2``) only if
   that is given. How they travel depends on ``transport`` (see :mod:`mavsim.scenario`):
 
   ``"link"``   the obstacle's own system on the obstacle link, as ``message``: ODOMETRY
@@ -35,6 +38,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from mavsim.geo import ned_to_global
+from mavsim.noise import GaussMarkovError
 from mavsim.scenario import Obstacle
 from mavsim.telemetry import odometry_message, upper_triangle_6x6
 
@@ -135,7 +139,7 @@ class ObstacleSystem:
         self.geoid_separation_m = float(geoid_separation_m)
         self.track = ObstacleTrack(ob)
         self.rng = rng
-        self._L = noise_factor(ob.measurement_cov_m2)
+        self._position_error = GaussMarkovError(noise_factor(ob.measurement_cov_m2), ob.measurement_correlation_s)
         self._Lv = None if ob.velocity_cov_m2ps2 is None else noise_factor(ob.velocity_cov_m2ps2)
         self._pose_cov = upper_triangle_6x6(ob.measurement_cov_m2, _NAN)
         if ob.velocity_cov_m2ps2 is None:
@@ -176,7 +180,7 @@ class ObstacleSystem:
                 self.next_heartbeat_us += 1_000_000
         if now_us >= self.next_report_us:
             p, v = self.track.state(now_us * 1e-6)
-            p_meas = p + self._L @ self.rng.standard_normal(3)  # p + L w, w ~ N(0, I)
+            p_meas = p + self._position_error.sample(now_us, self.rng.standard_normal(3))  # white: p + L w, w ~ N(0, I)
             v_meas = np.full(3, _NAN) if self._Lv is None else v + self._Lv @ self.rng.standard_normal(3)
             out.extend(self._reports(now_us, p_meas, v_meas, own))
             while self.next_report_us <= now_us:

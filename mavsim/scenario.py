@@ -62,7 +62,9 @@ obstacle_sysid_base : int, default 101
 obstacle_compid : int, default 197 (MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY, never 1)
 obstacles : array of tables ``[[world.obstacles]]`` with name, radius_m, start_ned_m,
     ``velocity_ned_mps`` or (``waypoints_ned_m``, ``speed_mps``, optional ``loop``),
-    measurement_cov_m2, optional velocity_cov_m2ps2 (velocity reported only if
+    measurement_cov_m2, optional measurement_correlation_s (default 0: white; > 0: the
+    position error is Gauss-Markov with that correlation time and the same covariance,
+    see :mod:`mavsim.noise`), optional velocity_cov_m2ps2 (velocity reported only if
     given), report_rate_hz (default 10), start_delay_s (default 0), and how the obstacle
     reaches the companion (docs/OBSTACLES.md):
 
@@ -160,6 +162,7 @@ class Obstacle:
     report_rate_hz: float
     start_delay_s: float
     transport: str = "link"
+    measurement_correlation_s: float = 0.0
     message: str = "ODOMETRY"
     clock_offset_s: float = 0.0
     clock_drift: float = 0.0
@@ -219,7 +222,7 @@ SIM_KEYS = {
 WORLD_KEYS = {"obstacles", "obstacle_sysid_base", "obstacle_compid"}
 OBSTACLE_KEYS = {
     "name", "radius_m", "start_ned_m", "velocity_ned_mps", "waypoints_ned_m", "speed_mps", "loop",
-    "measurement_cov_m2", "velocity_cov_m2ps2", "report_rate_hz", "start_delay_s",
+    "measurement_cov_m2", "measurement_correlation_s", "velocity_cov_m2ps2", "report_rate_hz", "start_delay_s",
     "transport", "message", "clock_offset_s", "clock_drift", "icao_address", "emitter_type",
     "clock_reboot_at_s", "garbage_stamp_at_s",
 }
@@ -405,6 +408,7 @@ def _obstacle(src: str, index: int, raw: Any) -> Obstacle:
         speed_mps=s.number("speed_mps", 1.0, positive=True) if has_w else 0.0,
         loop=s.boolean("loop", False),
         measurement_cov_m2=s.covariance("measurement_cov_m2", 1e-3 * np.eye(3)),
+        measurement_correlation_s=s.number("measurement_correlation_s", 0.0, lo=0.0, hi=3600.0),
         velocity_cov_m2ps2=vel_cov,
         report_rate_hz=s.number("report_rate_hz", 10.0, lo=0.1, hi=200.0),
         start_delay_s=s.number("start_delay_s", 0.0, lo=0.0),

@@ -29,6 +29,7 @@ from companion.commands._argtypes import (
 from companion.errors import ConfigError
 from companion.offline.campaign import (
     DEFAULT_DURATION_S,
+    EKF_CORRELATION_S,
     FAMILIES,
     METHODS,
     format_table,
@@ -72,9 +73,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --episode: also write the episode's scenario as a TOML file (fly it with companion demo)")
     p.add_argument("--c-min", type=open_unit_interval, default=0.90, help="contour of touch that may not be crossed")
     p.add_argument("--duration", type=positive_seconds, default=DEFAULT_DURATION_S, help="simulated seconds per episode")
-    p.add_argument("--drone-noise-correlation", type=non_negative_seconds, default=0.0, metavar="SECONDS",
-                   help="correlation time of the simulated drone position error (Gauss-Markov, as an EKF's error "
-                        "wanders; same covariance, reported honestly); 0: white")
+    p.add_argument("--noise-correlation", type=non_negative_seconds, default=0.0, metavar="SECONDS",
+                   help="correlation time of the simulated drone position error and of every obstacle's measurement "
+                        "error (Gauss-Markov, as an EKF's or a GNSS receiver's error wanders; same covariances, reported "
+                        f"honestly); 0: white; {EKF_CORRELATION_S:g} s is the honest model of docs/CAMPAIGNS.md")
     p.add_argument("--results", metavar="FILE", default=None,
                    help="results file (JSON lines, one finished run per line, appended as runs finish; "
                         "default: beside --json with the suffix .jsonl, else campaign-FAMILY-seedS.jsonl; "
@@ -113,13 +115,13 @@ def run(args: argparse.Namespace) -> int:
     if args.save_scenario:
         path = write_scenario(generate_scenario(args.family, args.seed, args.episode, c_min=args.c_min,
                                                 duration_s=args.duration,
-                                                drone_noise_correlation_s=args.drone_noise_correlation),
+                                                noise_correlation_s=args.noise_correlation),
                               args.save_scenario)
         print(f"wrote {path}")
     store = results_path(args)
     result = run_campaign(args.family, episodes, args.methods, args.seed, workers=args.workers, c_min=args.c_min,
                           duration_s=args.duration, progress=args.progress, results_path=store, resume=args.resume,
-                          scheduler=args.scheduler, drone_noise_correlation_s=args.drone_noise_correlation)
+                          scheduler=args.scheduler, noise_correlation_s=args.noise_correlation)
     print(format_table(result))
     if store is not None:
         print(f"results: {store}")

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -151,12 +152,26 @@ def _require_pd(ok: NDArray[np.bool_], name: str) -> None:
         raise InputError(f"{name} is not positive definite{where}")
 
 
-def _symmetrised(name: str, arr: Array) -> Array:
-    scale = np.max(np.abs(arr), axis=(-2, -1), keepdims=True)
-    asym = np.abs(arr - np.swapaxes(arr, -1, -2))
-    if np.any(asym > 1e-9 * scale + 1e-300):
+def _symmetrised_components(name: str, comp: Array, check: bool = True) -> Array:
+    """Check a ``(d, d, n)`` component batch for symmetry (unless ``check`` is false) and symmetrise it.
+
+    ``0.5 (a + a')`` per off-diagonal pair; the diagonal is left as it is (``0.5 (a + a)``
+    is ``a`` exactly).
+    """
+    d = comp.shape[0]
+    if d < 2:
+        return comp
+    if comp.base is not None or not comp.flags.writeable:    # a view of the caller's array: copy first
+        comp = comp.copy()
+    iu, ju = np.triu_indices(d, 1)
+    upper, lower = comp[iu, ju], comp[ju, iu]
+    asym = np.abs(upper - lower) if check else None
+    if check and np.any(asym > 1e-9 * np.max(np.abs(comp), axis=(0, 1)) + 1e-300):
         raise InputError(f"{name} is not symmetric (largest asymmetry {float(np.max(asym)):.3g})")
-    return 0.5 * (arr + np.swapaxes(arr, -1, -2))
+    mean = 0.5 * (upper + lower)
+    comp[iu, ju] = mean
+    comp[ju, iu] = mean
+    return comp
 
 
 @dataclass(frozen=True)
@@ -178,8 +193,21 @@ class CovariancePairs:
     s2: Array
 
     @classmethod
-    def from_arrays(cls, cov1: ArrayLike, cov2: ArrayLike, lead: tuple[int, ...] | None = None) -> CovariancePairs:
-        """Validate ``cov1``, ``cov2`` (..., d, d), broadcast to ``lead`` (default: their common leading shape)."""
+    def from_arrays(cls, cov1: ArrayLike, cov2: ArrayLike, lead: tuple[int, ...] | None = None,
+                    *, validated: bool = False) -> CovariancePairs:
+        """Validate ``cov1``, ``cov2`` (..., d, d), broadcast to ``lead`` (default: their common leading shape).
+
+        ``validated=True``: the caller has already checked finiteness, symmetry (to 1e-9
+        relative) and positive definiteness (as :class:`~companion.core.planner.PlanRequest`
+        does on construction); the pairs are then only laid out and symmetrised.
+        """
+        if validated:
+            c1, c2 = np.asarray(cov1, dtype=float), np.asarray(cov2, dtype=float)
+            d = c1.shape[-1]
+            lead = np.broadcast_shapes(c1.shape[:-2], c2.shape[:-2]) if lead is None else lead
+            s1, s2 = (_symmetrised_components(name, K.matrices_to_components(np.broadcast_to(arr, lead + (d, d))),
+                                              check=False) for name, arr in (("cov1", c1), ("cov2", c2)))
+            return cls(lead=tuple(lead), s1=s1, s2=s2)
         c1, c2 = _checked("cov1", cov1, 2), _checked("cov2", cov2, 2)
         d = c1.shape[-1]
         for name, arr in (("cov1", c1), ("cov2", c2)):
@@ -192,7 +220,7 @@ class CovariancePairs:
                 raise InputError(f"leading dimensions do not broadcast: {exc}") from None
         out = []
         for name, arr in (("cov1", c1), ("cov2", c2)):
-            comp = K.matrices_to_components(_symmetrised(name, np.broadcast_to(arr, lead + (d, d))))
+            comp = _symmetrised_components(name, K.matrices_to_components(np.broadcast_to(arr, lead + (d, d))))
             _require_pd(K.is_positive_definite(comp).reshape(lead), name)
             out.append(comp)
         return cls(lead=tuple(lead), s1=out[0], s2=out[1])
@@ -264,13 +292,22 @@ class MinmaxResult:
     eta: Array
     alpha: Array
     beta: Array
-    overlap: Array
-    confidence: Array
     normal: Array
     s1: Array
     s2: Array
     eta_grad_mu1: Array
     residual: Array
+
+    # computed on first use: the planner's rows and rechecks need only eta, normal, s1, s2
+    @cached_property
+    def overlap(self) -> Array:
+        """``Y = 2 (1 - Phi(eta))``."""
+        return 2.0 * special.ndtr(-self.eta)
+
+    @cached_property
+    def confidence(self) -> Array:
+        """Contour of touch ``F_chi2_d(eta^2)``."""
+        return special.gammainc(self.alpha.shape[-1] / 2.0, 0.5 * self.eta * self.eta)
 
 
 def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> MinmaxResult:
@@ -307,52 +344,53 @@ def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...]) -
     # Keep the iteration well-defined for coincident means; they are patched at the end.
     dv = np.where(coincident[None, :], np.eye(d)[:, :1] * scale[None, :], delta) if np.any(coincident) else delta
 
+    three = d == 3 and isinstance(S1, np.ndarray)
     # Start at the geometric mean of the generalised eigenvalues of (S2, S1): exact when S2 = g S1.
     u = 0.5 * (np.log(K.det(S2)) - np.log(K.det(S1))) / d
-    if d == 3 and isinstance(S1, np.ndarray):
-        u = _newton_polynomial(S1, S2, np.asarray(dv), u)
-    else:
-        u = _newton_direct(S1, S2, dv, u)
-
+    u = _newton_polynomial(S1, S2, np.asarray(dv), u) if three else _newton_direct(S1, S2, dv, u)
     t = np.exp(u)
     lam = t / (1.0 + t)
-    a_inv = K.inv_sym(K.axpy(t, S1, S2))
-    x = K.mv(a_inv, dv)
-    q1 = K.dot(x, K.mv(S1, x))
-    q2 = K.dot(x, K.mv(S2, x))
+    if three:    # whole-array adjugate: x = adj(A) delta / det(A)
+        a = t * S1 + S2
+        adj = K.adjugate3(a)
+        x = K.matvec(adj, np.asarray(dv)) / K.dots(a[0], adj[:, 0])
+        q1 = K.dots(x, K.matvec(S1, x))
+        q2 = K.dots(x, K.matvec(S2, x))
+    else:
+        x = np.array(K.mv(K.inv_sym(K.axpy(t, S1, S2)), dv))
+        q1 = K.dot(x, K.mv(S1, x))
+        q2 = K.dot(x, K.mv(S2, x))
     eta1 = t * np.sqrt(q1)
     eta2 = np.sqrt(q2)
     eta = 0.5 * (eta1 + eta2)
     residual = eta1 - eta2
-    alpha = [c * (1.0 + t) for c in x]  # (lam S1 + (1-lam) S2)^-1 delta = (1 + t) x
-    xn = np.sqrt(K.dot(x, x))
-    normal = [c / xn for c in x]
+    alpha = x * (1.0 + t)  # (lam S1 + (1-lam) S2)^-1 delta = (1 + t) x
+    xn = np.sqrt(K.dots(x, x))
+    normal = x / xn
     s1 = np.sqrt(q1) / xn
     s2 = np.sqrt(q2) / xn
     if np.any(coincident):
         eta = np.where(coincident, 0.0, eta)
         residual = np.where(coincident, 0.0, residual)
-        alpha = [np.where(coincident, 0.0, c) for c in alpha]
-    beta = K.dot(alpha, m1) + lam * K.quad(alpha, S1)
+        alpha = np.where(coincident, 0.0, alpha)
+    beta = K.dots(alpha, m1) + lam * K.quad(alpha, S1)
     ssum = s1 + s2
 
     def shaped(a: Array) -> Array:
         return a.reshape(lead)
 
-    def shaped_vec(v: list[Array]) -> Array:
-        return K.from_components(v).reshape(lead + (d,))
+    def shaped_vec(v: Array) -> Array:
+        return v.T.reshape(lead + (d,))
 
     return MinmaxResult(
         lam=shaped(lam),
         eta=shaped(eta),
         alpha=shaped_vec(alpha),
         beta=shaped(beta),
-        overlap=shaped(2.0 * special.ndtr(-eta)),
-        confidence=shaped(special.gammainc(d / 2.0, 0.5 * eta * eta)),
         normal=shaped_vec(normal),
         s1=shaped(s1),
         s2=shaped(s2),
-        eta_grad_mu1=shaped_vec([-c / ssum for c in normal]),
+        eta_grad_mu1=shaped_vec(-normal / ssum),
         residual=shaped(residual),
     )
 
@@ -376,44 +414,76 @@ def _safeguarded_step(u: Array, phi: Array, dphi: Array, lo: Array, hi: Array) -
 
 
 def _newton_polynomial(S1: Array, S2: Array, delta: Array, u: Array) -> Array:
-    """``u = log t`` solving ``phi(u) = 0`` for 3x3 pairs, with ``A(t)^-1 delta`` as a polynomial in ``t``.
+    """``u = log t`` solving ``phi(u) = 0`` for 3x3 pairs, with ``phi`` a ratio of two quartics in ``t``.
 
     ``adj(t S1 + S2) = t^2 adj(S1) + t M + adj(S2)`` with ``M = adj(S1 + S2) - adj(S1) - adj(S2)``,
     so ``x`` is parallel to ``v(t) = t^2 a2 + t a1 + a0`` (``a2 = adj(S1) delta``, ...) and
-    ``phi(u) = 2u + log(v'S1v) - log(v'S2v)`` (the determinant cancels);
-    ``phi'(u) = 2 + 2t (v_t'S1v / v'S1v - v_t'S2v / v'S2v)``. Three matrix-vector
-    products per pair are computed once; each Newton step is a few whole-array operations.
-    All three adjugate terms are positive semidefinite, so ``v`` loses no precision to
-    cancellation beyond the covariances' condition number.
+    ``phi(u) = 2u + log(n1(t)) - log(n2(t))`` with the quartics ``n_k(t) = v(t)'S_k v(t)``
+    (the determinant cancels); ``phi'(u) = 2 + t (n1'(t) / n1 - n2'(t) / n2)``. Because
+    ``adj(S) S = det(S) I``, most coefficients are ``det(S_k)`` times a quadratic form of
+    ``delta`` with a positive definite adjugate:
+
+        n1 = det1 (d'a2) t^4 + 2 det1 (d'a1) t^3 + (a1'S1a1 + 2 det1 d'a0) t^2 + 2 a1'S1a0 t + a0'S1a0
+        n2 = a2'S2a2 t^4 + 2 a1'S2a2 t^3 + (a1'S2a1 + 2 det2 d'a2) t^2 + 2 det2 (d'a1) t + det2 d'a0
+
+    so only the ``t`` (resp. ``t^3``) coefficient can be negative and the expansion loses
+    little to cancellation. The ten coefficients are computed once per pair; a Newton
+    step is then about twenty whole-array operations on ``(2, n)`` arrays, whatever ``d``
+    costs elsewhere. The final separator is evaluated from ``A(t)^-1`` directly (in
+    :func:`_minmax`), so the coefficients only locate the root.
     """
     adj1, adj2 = K.adjugate3(S1), K.adjugate3(S2)
     mixed = K.adjugate3(S1 + S2) - adj1 - adj2
     a2, a1, a0 = K.matvec(adj1, delta), K.matvec(mixed, delta), K.matvec(adj2, delta)
+    det1 = K.dots(S1[0], adj1[:, 0])        # det(S) = S[0] . adj(S)[:, 0]
+    det2 = K.dots(S2[0], adj2[:, 0])
+    d2, d1, d0 = K.dots(delta, a2), K.dots(delta, a1), K.dots(delta, a0)
+    s1a1, s2a1 = K.matvec(S1, a1), K.matvec(S2, a1)
+    coef = np.empty((5, 2, u.shape[0]))     # coef[k, j]: t^k coefficient of n_{j+1}
+    coef[4, 0], coef[4, 1] = det1 * d2, K.dots(a2, K.matvec(S2, a2))
+    coef[3, 0], coef[3, 1] = 2.0 * det1 * d1, 2.0 * K.dots(a2, s2a1)
+    coef[2, 0], coef[2, 1] = K.dots(a1, s1a1) + 2.0 * det1 * d0, K.dots(a1, s2a1) + 2.0 * det2 * d2
+    coef[1, 0], coef[1, 1] = 2.0 * K.dots(a0, s1a1), 2.0 * det2 * d1
+    coef[0, 0], coef[0, 1] = K.dots(a0, K.matvec(S1, a0)), det2 * d0
+    slope = coef[1:] * np.arange(1.0, 5.0)[:, None, None]      # t^(k-1) coefficients of n'
     n = u.shape[0]
     lo = np.full(n, -np.inf)
     hi = np.full(n, np.inf)
-    idx = None  # all pairs iterate until the first converge, then only the rest
+    idx = None  # all pairs iterate until most converge, then only the rest
+    active = None  # pairs of the current batch still iterating (a converged pair is frozen)
     for _ in range(_MAX_NEWTON):
         ua = u if idx is None else u[idx]
         t = np.exp(ua)
-        v = (a2 * t + a1) * t + a0
-        vt = (2.0 * t) * a2 + a1
-        s1v, s2v = K.matvec(S1, v), K.matvec(S2, v)
-        n1, n2 = K.dots(v, s1v), K.dots(v, s2v)
-        phi = 2.0 * ua + np.log(n1 / n2)
-        dphi = 2.0 + 2.0 * t * (K.dots(vt, s1v) / n1 - K.dots(vt, s2v) / n2)
+        val = coef[4] * t + coef[3]
+        der = slope[3] * t + slope[2]
+        for k in (2, 1):
+            val *= t
+            val += coef[k]
+            der *= t
+            der += slope[k - 1]
+        val *= t
+        val += coef[0]
+        phi = 2.0 * ua + np.log(val[0] / val[1])
+        dphi = 2.0 + t * (der[0] / val[0] - der[1] / val[1])
         la, ha = (lo, hi) if idx is None else (lo[idx], hi[idx])
         new_u, la, ha = _safeguarded_step(ua, phi, dphi, la, ha)
         keep = np.abs(new_u - ua) > _U_TOL * np.maximum(1.0, np.abs(ua))
+        if active is not None:     # frozen pairs keep their value: each pair's result is batch-independent
+            new_u = np.where(active, new_u, ua)
+            keep &= active
         if idx is None:
             u, lo, hi = new_u, la, ha
         else:
             u[idx], lo[idx], hi[idx] = new_u, la, ha
-        if not np.any(keep):
+        left = int(np.count_nonzero(keep))
+        if left == 0:
             return u
-        if not np.all(keep):
+        if 2 * left < keep.size:      # compacting costs a gather per array: only when it halves the work
             idx = np.flatnonzero(keep) if idx is None else idx[keep]
-            S1, S2, a2, a1, a0 = S1[:, :, keep], S2[:, :, keep], a2[:, keep], a1[:, keep], a0[:, keep]
+            coef, slope = coef[:, :, keep], slope[:, :, keep]
+            active = None
+        elif left < keep.size:
+            active = keep
     logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", _MAX_NEWTON, n if idx is None else idx.size)
     return u
 

@@ -42,7 +42,6 @@ SEV_NOTICE = mavlink2.MAV_SEVERITY_NOTICE
 SEV_INFO = mavlink2.MAV_SEVERITY_INFO
 
 _HEARTBEAT_PERIOD_S = 1.0
-_SLACK_WARN_PERIOD_S = 2.0
 _UNCONSTRAINED_WARN_PERIOD_S = 5.0
 _SIGNATURE_WARN_PERIOD_S = 5.0  # as mavsim's
 
@@ -99,7 +98,6 @@ class Companion:
         self._replans_asked = 0
         self._last_replan_t: float | None = None
         self._last_hb_t: float | None = None
-        self._last_slack_warn = -math.inf
         self._last_unconstrained_warn = -math.inf
         self._plan_too_old = False  # braking for an old plan was announced
         self._signatures_rejected = 0
@@ -321,12 +319,16 @@ class Companion:
         else:
             if status is PlanStatus.SLACK:
                 self.state.slack_plans += 1
-                if t_s - self._last_slack_warn >= _SLACK_WARN_PERIOD_S:
-                    self._last_slack_warn = t_s
-                    said.append(self._say(t_s, SEV_WARNING, f"companion: safety slack used ({plan.slack_max:.2f})"))
+                # One short STATUSTEXT on every slack replan (issue 15): at most one per
+                # replan_period_s (3.3 Hz), about 60 bytes each, well within a telemetry link.
+                said.append(self._say(t_s, SEV_WARNING,
+                                      f"companion: safety slack used ({plan.slack_max:.2f}) #{self.state.slack_plans}"))
             self.executor.adopt(plan, job.t_vehicle_s, job.t_link_s, job.position)
         # Obstacles beyond sensing range were ignored by design: their contour says nothing.
-        ct_plan = np.asarray(plan.contour_of_touch)[np.asarray(plan.in_range, dtype=bool)]
+        in_range = np.asarray(plan.in_range, dtype=bool)
+        ct_plan = np.asarray(plan.contour_of_touch)[in_range]
+        planned_contour = {} if status is PlanStatus.FAILED else {
+            key: float(plan.contour_of_touch[i][0]) for i, key in enumerate(job.tracks_constrained) if in_range[i]}
         self.records.append(
             ReplanRecord(
                 t_link_s=job.t_link_s,
@@ -347,6 +349,7 @@ class Companion:
                 command=np.asarray(plan.commands[0]).copy() if status is not PlanStatus.FAILED else np.zeros(3),
                 t_applied_s=t_s,
                 tracks_unconstrained=len(job.tracks_unconstrained),
+                planned_contour=planned_contour,
             )
         )
         return said

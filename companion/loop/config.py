@@ -51,7 +51,7 @@ SIMULATOR_KEYS: dict[str, frozenset[str]] = {
     "world": frozenset({"obstacles", "obstacle_sysid_base", "obstacle_compid"}),
     "world.obstacles": frozenset({
         "name", "radius_m", "start_ned_m", "velocity_ned_mps", "waypoints_ned_m", "speed_mps", "loop",
-        "measurement_cov_m2", "velocity_cov_m2ps2", "report_rate_hz", "start_delay_s",
+        "measurement_cov_m2", "measurement_correlation_s", "velocity_cov_m2ps2", "report_rate_hz", "start_delay_s",
         "transport", "message", "clock_offset_s", "clock_drift", "icao_address", "emitter_type",
         "clock_reboot_at_s", "garbage_stamp_at_s",
     }),

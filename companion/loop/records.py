@@ -64,7 +64,10 @@ class ReplanRecord:
     ``t_applied_s`` the link time at which the loop adopted (or rejected) the plan: the
     same tick in lockstep, later in real time. ``realised_contour`` is the contour of
     touch between the drone's estimate and each tracked obstacle's estimate at the
-    request (physical radii included), keyed by track. ``tracks_unconstrained`` counts
+    request (physical radii included), keyed by track. ``planned_contour`` is the plan's own
+    contour of touch at its first step (``t_vehicle_s + step_s``, the step the vehicle flies
+    before the next replan) for each constrained track within sensing range, keyed by track
+    (empty for a failed plan): the promise the plan makes. ``tracks_unconstrained`` counts
     tracks in the request that the planner was not asked to avoid (over the
     ``max_constrained_tracks`` limit, see :mod:`companion.loop.track_selection`).
     """
@@ -87,6 +90,7 @@ class ReplanRecord:
     command: np.ndarray
     t_applied_s: float = 0.0
     tracks_unconstrained: int = 0
+    planned_contour: dict = field(default_factory=dict)
 
 
 @dataclass

@@ -47,6 +47,8 @@ class ReplanJob:
         Contour of touch between the drone's and each track's estimate now, keyed by track.
     tracks_unconstrained : tuple
         Tracks left out of ``request`` (over the constrained-track limit).
+    tracks_constrained : tuple
+        The tracks in ``request``, in its obstacle order (static obstacles follow them).
     """
 
     seq: int
@@ -62,6 +64,7 @@ class ReplanJob:
     obstacle_covs: dict
     realised_contour: dict
     tracks_unconstrained: tuple = ()
+    tracks_constrained: tuple = ()
 
 
 class RequestBuilder:
@@ -218,6 +221,7 @@ class RequestBuilder:
             obstacle_covs=now_cov,
             realised_contour=self._realised_contour(position, cov_now, keys, now_pos, now_cov),
             tracks_unconstrained=tuple(left_out),
+            tracks_constrained=tuple(constrained),
         )
 
     # ------------------------------------------------------------------ many tracks

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import json
 import logging
+import os
 import pkgutil
 import platform
 import sys
@@ -20,6 +21,38 @@ def _fmt(value: object) -> str:
     if isinstance(value, float):
         return f"{value:.4g}"
     return "" if value is None else str(value)
+
+
+#: The issue's must-show figures, printed together after the table: (suite, row name).
+SUMMARY = (
+    ("planner", "hyperplane replan time / OSQP's own solve time"),
+    ("planner", "replan N=40 P=3 W=2 hyperplane median"),
+    ("planner", "replan N=40 P=3 W=2 hyperplane p99"),
+    ("planner", "hyperplane largest replan"),
+    ("planner", "hyperplane speed-up over cvxpy"),
+    ("overlap", "minmax batched, 10k 3-D pairs"),
+    ("overlap", "max relative eta difference vs brentq"),
+    ("estimator", "tracker cycle: update 10 tracks + predict each N=40 (median)"),
+    ("campaign", "core-seconds per antipodal campaign episode (hyperplane)"),
+)
+
+
+def _summary(rows: list[dict]) -> list[str]:
+    """The :data:`SUMMARY` rows as ``name: value unit (target ...; peer ...)`` lines, with the load."""
+    by_key = {(r["suite"], r["name"]): r for r in rows}
+    lines = []
+    for key in SUMMARY:
+        r = by_key.get(key)
+        if r is None:
+            continue
+        extra = [f"target {_fmt(r.get('target'))}"] if r.get("target") is not None else []
+        if r.get("peer") is not None:
+            extra.append(f"peer {_fmt(r.get('peer'))}")
+        lines.append(f"  {r['name']}: {_fmt(r['value'])} {r.get('unit', '')} ({'; '.join(extra)})")
+    if lines:
+        load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+        lines.insert(0, f"summary (load average {load}; timings under load are not final):")
+    return lines
 
 
 def main(argv: list[str]) -> int:
@@ -43,7 +76,11 @@ def main(argv: list[str]) -> int:
     print("  ".join(c.ljust(w) for c, w in zip(cols, widths)))
     for t in table:
         print("  ".join(v.ljust(w) for v, w in zip(t, widths)))
+    summary = _summary(rows)
+    if summary:
+        print("\n".join(summary))
     out = {
+        "load_average": os.getloadavg(),
         "machine": {"python": platform.python_version(), "platform": platform.platform(), "processor": platform.processor()},
         "rows": rows,
     }

@@ -115,3 +115,4 @@ def test_that_batch_results_equal_per_pair_results(seed, d):
             np.testing.assert_allclose(getattr(batch, field)[i], getattr(single, field), rtol=1e-12, atol=1e-15, err_msg=field)
         for field in ("alpha", "normal", "eta_grad_mu1"):
             np.testing.assert_allclose(getattr(batch, field)[i], getattr(single, field), rtol=1e-12, atol=1e-15, err_msg=field)
+

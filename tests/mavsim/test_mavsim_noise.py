@@ -75,3 +75,44 @@ def test_that_odometry_reports_a_correlated_error_with_its_true_covariance():
     assert len(errors) > 1000
     assert np.mean(nees) == pytest.approx(3.0, abs=0.8)  # ~100 independent stretches of tau in 60 s
     assert _lag1(errors) > 0.5  # consecutive reports share most of the error (white: ~0)
+
+
+def _obstacle_reports(correlation_s: float | None, seconds: float, seed: int) -> tuple[np.ndarray, list[float]]:
+    """Errors of a standing obstacle's ODOMETRY reports (10 Hz) and their NEES against the covariance reported."""
+    from mavsim.obstacles import ObstacleSystem
+
+    table = {"name": "ob", "start_ned_m": [3.0, 1.0, -5.0], "velocity_ned_mps": [0.0, 0.0, 0.0],
+             "measurement_cov_m2": P.tolist()}
+    if correlation_s is not None:
+        table["measurement_correlation_s"] = correlation_s
+    ob = scenario_from_dict({"world": {"obstacles": [table]}}).obstacles[0]
+    system = ObstacleSystem(ob, 101, 197, np.random.default_rng(seed), 0)
+    errors, nees = [], []
+    for k in range(int(seconds * 10)):
+        for _, msg in system.due(1000 + k * 100_000):
+            if msg.get_type() != "ODOMETRY":
+                continue
+            e = np.array([msg.x, msg.y, msg.z]) - ob.start_ned_m
+            ut = msg.pose_covariance
+            reported = np.array([[ut[0], ut[1], ut[2]], [ut[1], ut[6], ut[7]], [ut[2], ut[7], ut[11]]])
+            errors.append(e)
+            nees.append(float(e @ np.linalg.solve(reported, e)))
+    return np.array(errors), nees
+
+
+def test_that_an_obstacle_reports_a_correlated_error_with_its_true_covariance():
+    tau = 0.5
+    errors, nees = _obstacle_reports(tau, 200.0, seed=4)
+    assert len(errors) == 2000
+    assert np.mean(nees) == pytest.approx(3.0, abs=0.5)  # ~400 independent stretches of tau in 200 s
+    assert _lag1(errors) == pytest.approx(math.exp(-0.1 / tau), abs=0.06)  # reports 0.1 s apart
+    white, white_nees = _obstacle_reports(None, 200.0, seed=4)
+    assert abs(_lag1(white)) < 0.1 and np.mean(white_nees) == pytest.approx(3.0, abs=0.3)
+    assert np.array_equal(white, _obstacle_reports(0.0, 200.0, seed=4)[0])  # 0 is the white noise of before
+
+
+def test_that_the_obstacle_correlation_time_is_a_checked_obstacle_key():
+    base = {"name": "ob", "start_ned_m": [3.0, 1.0, -5.0], "velocity_ned_mps": [0.0, 0.0, 0.0]}
+    assert scenario_from_dict({"world": {"obstacles": [base]}}).obstacles[0].measurement_correlation_s == 0.0
+    with pytest.raises(ScenarioError, match="measurement_correlation_s"):
+        scenario_from_dict({"world": {"obstacles": [dict(base, measurement_correlation_s=-2.0)]}})

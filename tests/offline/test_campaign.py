@@ -21,6 +21,7 @@ from companion.offline.campaign import (
     SPAWN_CLEARANCE_M,
     SPEED_MAX_MPS,
     EpisodeTask,
+    ResultsFile,
     clopper_pearson,
     collision_bound,
     episode_sim_seed,
@@ -101,14 +102,19 @@ def test_that_an_episode_is_drawn_from_its_seed_and_index_alone():
     assert episode_sim_seed(5, 3) == episode_sim_seed(5, 3) != episode_sim_seed(5, 4)
 
 
-def test_that_a_correlated_drone_error_is_opt_in_and_leaves_the_rest_of_the_episode_alone():
+def test_that_correlated_drone_and_obstacle_errors_are_opt_in_and_leave_the_rest_of_the_episode_alone():
     white = generate_scenario("crossing", 5, 3)
     assert "position_noise_correlation_s" not in white["sim"]  # the default episode is the one of before
-    wandering = generate_scenario("crossing", 5, 3, drone_noise_correlation_s=2.0)
-    assert wandering["sim"].pop("position_noise_correlation_s") == 2.0 and wandering == white
-    assert mavsim_load_dict(generate_scenario("crossing", 5, 3, drone_noise_correlation_s=2.0)).sim.position_noise_correlation_s == 2.0
+    assert not any("measurement_correlation_s" in ob for ob in white["world"]["obstacles"])
+    wandering = generate_scenario("crossing", 5, 3, noise_correlation_s=2.0)
+    assert wandering["sim"].pop("position_noise_correlation_s") == 2.0
+    assert [ob.pop("measurement_correlation_s") for ob in wandering["world"]["obstacles"]] == [2.0] * len(white["world"]["obstacles"])
+    assert wandering == white
+    honest = mavsim_load_dict(generate_scenario("crossing", 5, 3, noise_correlation_s=2.0))
+    assert honest.sim.position_noise_correlation_s == 2.0
+    assert all(ob.measurement_correlation_s == 2.0 for ob in honest.obstacles)
     with pytest.raises(SystemExit):
-        main(["campaign", "--drone-noise-correlation", "-1"])
+        main(["campaign", "--noise-correlation", "-1"])
 
 
 def test_that_unknown_family_and_method_are_rejected():
@@ -165,9 +171,9 @@ def test_that_the_bound_is_phi_of_minus_the_touch_radius():
     assert collision_bound(0.90) == pytest.approx(0.0124 / 2, rel=2e-3)
 
 
-def _record(t, drone, obstacles, contours, status="optimal"):
+def _record(t, drone, obstacles, contours, status="optimal", planned=None):
     drone = np.array(drone, float)
-    return SimpleNamespace(t_link_s=t, status=status, slack_max=0.0 if status == "optimal" else 0.4, solve_time_s=0.01,
+    return SimpleNamespace(planned_contour=planned or {}, t_link_s=t, status=status, slack_max=0.0 if status == "optimal" else 0.4, solve_time_s=0.01,
                            command=np.zeros(3), planned_min_contour=min(contours.values()),
                            drone_position=drone, drone_cov=0.01 * np.eye(3), realised_contour=contours,
                            plan_positions=drone + np.array([[0.3, 0.0, 0.0]] * 28),
@@ -183,10 +189,11 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
     }
     key_a, key_b = (101, 197), (102, 197)
     records = [
-        _record(0.0, [0, 0, 0], {key_a: [5, 0, 0], key_b: [20, 0, 0]}, {key_a: 0.99, key_b: 1.0}),
-        _record(0.05, [0, 0, 0], {key_a: [5, 0, 0]}, {key_a: 0.5}, status="failed"),  # off the 0.3 s grid
-        _record(0.3, [0, 0, 0], {key_a: [0.9, 0, 0], key_b: [9, 0, 0]}, {key_a: 0.2, key_b: 0.95}, status="slack"),
-        _record(0.6, [0, 0, 0], {key_a: [3, 0, 0], key_b: [0.7, 0, 0]}, {key_a: 0.95, key_b: 0.0}),
+        _record(0.0, [0, 0, 0], {key_a: [5, 0, 0], key_b: [20, 0, 0]}, {key_a: 0.99, key_b: 1.0}, planned={key_a: 0.3}),
+        _record(0.05, [0, 0, 0], {key_a: [5, 0, 0]}, {key_a: 0.5}, status="failed", planned={key_a: 0.0}),  # off the 0.3 s grid
+        _record(0.3, [0, 0, 0], {key_a: [0.9, 0, 0], key_b: [9, 0, 0]}, {key_a: 0.2, key_b: 0.95}, status="slack",
+                planned={key_a: 0.9, key_b: 0.999}),
+        _record(0.6, [0, 0, 0], {key_a: [3, 0, 0], key_b: [0.7, 0, 0]}, {key_a: 0.95, key_b: 0.0}, planned={key_b: 0.5}),
     ]
     truth_at = [
         (0.0, np.zeros(3), {"a": np.array([5.0, 0, 0]), "b": np.array([20.0, 0, 0])}),
@@ -230,6 +237,13 @@ def test_that_scoring_counts_steps_pairs_and_true_collisions_by_hand():
     assert s.obstacle_collision and s.collided and s.collisions == 3
     assert s.contact_time_s == pytest.approx(0.15 + 0.1)  # walls are not obstacles
     assert s.pair_time_in_range_s == pytest.approx(5 * 0.3)
+    # the plan's promise at its first step against the truth one step (0.3 s) later: the 0.0 s plan's a
+    # (c = 0.3) against 0.3 s (hit), the 0.3 s plan's a (0.9: miss, 3 m) and b (0.999: 0.85 m, miss);
+    # the 0.6 s plan has no replan 0.3 s later, the off-grid one is no step
+    plan_promises = [float(norm.cdf(-touch_radius(c, 3))) for c in (0.3, 0.9, 0.999)]
+    assert sum(s.plan_promise_pairs) == 3 and sum(s.plan_promise_hits) == 1
+    assert s.plan_promise_hits[promise_bin(plan_promises[0])] == 1
+    assert sum(s.plan_promise_sum) == pytest.approx(sum(plan_promises))
 
 
 # --------------------------------------------------------------------------- closed loop
@@ -250,13 +264,37 @@ def test_that_a_tiny_campaign_runs_and_reports_every_method(tiny_campaign, tmp_p
         assert s.collision_ci95 == pytest.approx(clopper_pearson(s.collisions, 2))
         assert s.steps > 0 and s.solve_time_median_ms > 0
         assert s.bound_phi_minus_r_min == pytest.approx(collision_bound(0.90))
+        assert sum(b.pairs for b in s.plan_reliability) > 0  # the plans' promises were scored
     table = format_table(res)
     assert "hyperplane" in table and "deterministic" in table and "Phi(-r_min)" in table
+    assert "hyperplane: plan's promise (first step) against truth over" in table
     doc = json.loads(json.dumps(res.to_json(), allow_nan=False))  # strict JSON: no inf/NaN
     assert doc["summary"]["hyperplane"]["episodes"] == 2 and len(doc["results"]) == 4
     written = res.plot(tmp_path / "fig")
-    assert [p.name for p in written] == ["collision_rate.png", "min_contour_ecdf.png", "reliability.png"]
+    assert [p.name for p in written] == ["collision_rate.png", "min_contour_ecdf.png", "reliability.png", "reliability_estimates.png"]
     assert all(p.stat().st_size > 1000 for p in written)
+
+
+def test_that_the_reliability_command_reads_results_files_and_draws_one_diagram_per_method(tiny_campaign, tmp_path, capsys):
+    from companion.offline.campaign.store import campaign_header
+
+    paths = []
+    for c_min in (0.9, 0.5):  # the same runs filed under two c_min: one curve each
+        path = tmp_path / f"c{c_min}.jsonl"
+        with ResultsFile(path, campaign_header("antipodal", 4, c_min, SHORT_S)) as store:
+            for row in tiny_campaign.results:
+                store.append(row)
+        paths.append(str(path))
+    assert main(["reliability", *paths, "--plot", str(tmp_path / "fig")]) == 0
+    out = capsys.readouterr().out
+    ratio = tiny_campaign.summary["hyperplane"].plan_observed_over_promised
+    assert "hyperplane      0.50    2" in out and "hyperplane      0.90    2" in out
+    assert (f"{ratio:15.3g}" if ratio is not None else "-") in out
+    assert sorted(p.name for p in (tmp_path / "fig").iterdir()) == ["reliability_deterministic.png", "reliability_hyperplane.png"]
+    assert main(["reliability", paths[0], paths[0]]) == 2  # one campaign per c_min
+    (tmp_path / "bad.jsonl").write_text("{}\n")
+    assert main(["reliability", str(tmp_path / "bad.jsonl")]) == 2
+    assert "bad.jsonl:1: not a campaign results file" in capsys.readouterr().err
 
 
 def test_that_rerunning_one_episode_by_index_gives_the_same_result(tiny_campaign):

@@ -92,7 +92,12 @@ class OsqpQp:
         self._rho = rho
         self._rho_adapted = False
         self._max_iter = MAX_ITER
-        self.p_full = self._symmetric(layout.p_matrix(p_data))
+        # the full symmetric P (to evaluate x'Px) has a fixed pattern too: build it once from
+        # markers 1..nnz and refill its data by index on every update (no sparse arithmetic)
+        markers = np.arange(1.0, len(p_data) + 1.0)
+        self.p_full = self._symmetric(layout.p_matrix(markers))
+        self._p_full_source = self.p_full.data.astype(np.intp) - 1
+        self.p_full.data[:] = p_data[self._p_full_source]
         self._solver = osqp.OSQP()
         self._solver.setup(
             layout.p_matrix(p_data), q, layout.a_matrix_csc(a_data), l, u,
@@ -112,7 +117,7 @@ class OsqpQp:
             kwargs["u"] = u
         if p_data is not None:
             kwargs["Px"] = p_data
-            self.p_full = self._symmetric(self.layout.p_matrix(p_data))
+            np.take(p_data, self._p_full_source, out=self.p_full.data)
         if a_data is not None:
             kwargs["Ax"] = a_data
         if kwargs:

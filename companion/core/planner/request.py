@@ -152,7 +152,7 @@ class PlanRequest:
         them instead of validating the covariances again.
         """
         return CovariancePairs.from_arrays(np.broadcast_to(self.drone_covs[None], self.obstacle_covs.shape),
-                                           self.obstacle_covs)
+                                           self.obstacle_covs, validated=True)   # checked in __post_init__
 
     @property
     def horizon_steps(self) -> int:

@@ -22,6 +22,7 @@ One module per job:
 
 from companion.offline.campaign.generate import (
     DEFAULT_DURATION_S,
+    EKF_CORRELATION_S,
     FAMILIES,
     METHODS,
     RADIUS_RANGE_M,
@@ -41,7 +42,7 @@ from companion.offline.campaign.table import format_table
 from companion.offline.campaign.toml_writer import to_toml, write_scenario
 
 __all__ = [
-    "ACTIVE_CONTOUR", "DEFAULT_DURATION_S", "FAMILIES", "METHODS", "NEES_95", "RADIUS_RANGE_M", "SPAWN_CLEARANCE_M",
+    "ACTIVE_CONTOUR", "DEFAULT_DURATION_S", "EKF_CORRELATION_S", "FAMILIES", "METHODS", "NEES_95", "RADIUS_RANGE_M", "SPAWN_CLEARANCE_M",
     "SPEED_MAX_MPS", "CampaignResult", "EpisodeResult", "EpisodeScore", "EpisodeTask", "MethodSummary", "ResultsFile",
     "campaign_header", "clopper_pearson", "collision_bound", "episode_rng", "episode_sim_seed", "format_table",
     "generate_scenario", "open_executor", "random_covariance", "run_campaign", "run_episode", "score_run",

@@ -57,6 +57,12 @@ SENSING_RANGE_M = 10.0
 #: Velocity lag of the simulated vehicle, which the planner models too, seconds.
 VELOCITY_TIME_CONSTANT_S = 0.3
 DEFAULT_DURATION_S = 40.0
+#: The honest noise model's correlation time, seconds (``--noise-correlation``): PX4's EKF2
+#: position estimate follows GNSS at low frequency (the IMU only smooths it between fixes),
+#: so its error wanders as a single-frequency receiver's does; measured autocorrelations of
+#: such errors bend at about a minute (multipath, atmosphere, orbits). Obstacles that report
+#: their own GNSS position (ADS-B, Remote ID, a swarm radio) have the same kind of error.
+EKF_CORRELATION_S = 60.0
 QUIET_STREAMS_HZ = {"ATTITUDE": 5.0, "GLOBAL_POSITION_INT": 5.0, "LOCAL_POSITION_NED": 5.0}
 #: Time (s) the drone needs to take over before it moves (prestream + OFFBOARD), and its
 #: typical cruise speed (m/s) toward a far waypoint; used only to time encounters.
@@ -108,14 +114,15 @@ def _place(rng: np.random.Generator, draw: Callable[[], tuple[np.ndarray, np.nda
 
 
 def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90,
-                      duration_s: float = DEFAULT_DURATION_S, drone_noise_correlation_s: float = 0.0) -> dict:
+                      duration_s: float = DEFAULT_DURATION_S, noise_correlation_s: float = 0.0) -> dict:
     """Draw episode ``index`` of a ``family`` campaign with ``seed`` as a scenario dict (TOML tables).
 
     The same ``(family, seed, index)`` always gives the same dict. The planner's
     ``formulation`` is left at ``hyperplane``; the campaign overrides it per method.
-    ``drone_noise_correlation_s`` > 0 makes mavsim's drone position error a Gauss-Markov
-    process with that correlation time (``mavsim.noise``; same covariance, reported as
-    before); 0 keeps it white and the dict as it always was.
+    ``noise_correlation_s`` > 0 makes mavsim's drone position error and every obstacle's
+    measurement error Gauss-Markov processes with that correlation time (``mavsim.noise``;
+    same covariances, reported as before: the honest noise model, see
+    :data:`EKF_CORRELATION_S`); 0 keeps them white and the dict as it always was.
     """
     if family not in FAMILIES:
         raise InputError(f"unknown campaign family {family!r} (known: {', '.join(FAMILIES)})")
@@ -238,8 +245,10 @@ def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90
         },
         "world": {"obstacles": obstacles},
     }
-    if drone_noise_correlation_s > 0.0:
-        data["sim"]["position_noise_correlation_s"] = float(drone_noise_correlation_s)
+    if noise_correlation_s > 0.0:
+        data["sim"]["position_noise_correlation_s"] = float(noise_correlation_s)
+        for ob in obstacles:
+            ob["measurement_correlation_s"] = float(noise_correlation_s)
     if walls:
         data["map"] = {"walls": walls}
     return data

@@ -1,18 +1,23 @@
 """Promise against truth: a reliability diagram of the collision probability the contours promise.
 
-For every (step, obstacle) pair in sensing range, the realised contour of touch ``c``
-between the drone's and the obstacle's current estimates promises a collision
-probability of at most ``p = Phi(-r(c))``, ``r(c) = sqrt(chi2_3.ppf(c))`` (1/2 when the
-inflated ellipsoids already overlap, 0 for ``c = 1``). The truth says whether the
-bodies overlapped at that instant. Pairs are binned by ``p`` (decades); per bin the
-observed frequency gets a 95 % Clopper-Pearson interval. A bin *exceeds its promise*
-when the interval's lower end lies above the bin's mean promise; ``observed / promised``
-(hits over the sum of ``p``) says how conservative the promise is (1: exact, < 1:
-conservative).
+A contour of touch ``c`` between the drone's and an obstacle's Gaussians promises a
+collision probability of at most ``p = Phi(-r(c))``, ``r(c) = sqrt(chi2_3.ppf(c))`` (1/2
+when the inflated ellipsoids already overlap, 0 for ``c = 1``). Two promises are scored
+against the simulator's truth, per (replan step, obstacle) pair:
 
-The promise is evaluated on the estimates each replan started from (the state the
-previous plan was to keep outside ``c_min``), not on the plan's own predicted contours,
-which the replan records do not keep.
+*the plan's* (the reliability diagram): the contour the plan kept at its first step
+    between the planned drone position and the obstacle's prediction, for every track the
+    plan constrained within sensing range; the truth one step later (``step_s``, the
+    next replan) says whether the bodies overlapped. This is the chance constraint's own
+    promise, with everything that can break it: filter consistency, the obstacle's
+    prediction, the vehicle's tracking of the plan.
+*the estimates'*: the realised contour between the current estimates at the replan, the
+    truth at that instant (filter consistency alone).
+
+Pairs are binned by ``p`` (decades); per bin the observed frequency gets a 95 %
+Clopper-Pearson interval. A bin *exceeds its promise* when the interval's lower end lies
+above the bin's mean promise; ``observed / promised`` (hits over the sum of ``p``) says
+how conservative the promise is (1: exact, < 1: conservative).
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import logging
 import math
 from dataclasses import dataclass
 import numpy as np
+from scipy.stats import chi2, norm
 
 from companion.offline.campaign.jsonable import to_jsonable
 
@@ -33,6 +39,26 @@ PROMISE_EDGES = (0.0, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 0.5)
 def promise_bin(p: float) -> int:
     """Index of the bin of promised probability ``p`` in [0, 1/2]."""
     return int(min(max(np.searchsorted(PROMISE_EDGES, p, side="right") - 1, 0), len(PROMISE_EDGES) - 2))
+
+
+def promised_probability(contour: float) -> float:
+    """``Phi(-r(c))``, ``r(c) = sqrt(chi2_3.ppf(c))``: 1/2 for ``c = 0`` (overlap), 0 for ``c = 1``."""
+    return float(norm.cdf(-math.sqrt(chi2.ppf(min(max(contour, 0.0), 1.0), 3))))
+
+
+class PromiseTally:
+    """Per-bin counts of one episode's promises: pairs, true overlaps and the sum of promised ``p``."""
+
+    def __init__(self) -> None:
+        n = len(PROMISE_EDGES) - 1
+        self.pairs, self.hits, self.sums = [0] * n, [0] * n, [0.0] * n
+
+    def add(self, p: float, hit: bool) -> None:
+        """One (step, obstacle) pair promised ``p``; ``hit``: the bodies truly overlapped."""
+        b = promise_bin(p)
+        self.pairs[b] += 1
+        self.hits[b] += int(hit)
+        self.sums[b] += p
 
 
 @dataclass(frozen=True)

@@ -91,12 +91,14 @@ class CampaignResult:
     wall_time_s: float
     workers: int
     lost: int = 0  #: runs whose worker died (not in ``results``; ``--resume`` runs them again)
+    noise_correlation_s: float = 0.0  #: correlation time of the simulated position errors (0: white)
 
     def to_json(self) -> dict:
         """The JSON report (strict JSON: no inf or NaN; per-step lists pooled into the summary)."""
         return to_jsonable({
             "family": self.family, "seed": self.seed, "episodes": list(self.episodes),
             "methods": list(self.methods), "c_min": self.c_min, "duration_s": self.duration_s,
+            "noise_correlation_s": self.noise_correlation_s,
             "r_min": float(touch_radius(self.c_min, 3)), "bound_phi_minus_r_min": collision_bound(self.c_min),
             "workers": self.workers, "wall_time_s": self.wall_time_s, "cpu_count": os.cpu_count(),
             "summary": {m: s.to_json() for m, s in self.summary.items()},
@@ -107,4 +109,7 @@ class CampaignResult:
         """Draw the campaign figures into ``directory`` (see :mod:`companion.plots.campaign_figures`)."""
         from companion.plots.campaign_figures import plot_campaign
 
-        return plot_campaign(self.summary, directory, c_min=self.c_min, title=f"{self.family} campaign, seed {self.seed}")
+        noise = f"noise correlation {self.noise_correlation_s:g} s" if self.noise_correlation_s else "white noise"
+        title = (f"{self.family} campaign, seed {self.seed}, {len(self.episodes)} episodes, "
+                 f"c_min = {self.c_min:.2f}, {noise}")
+        return plot_campaign(self.summary, directory, c_min=self.c_min, title=title)

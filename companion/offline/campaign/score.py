@@ -16,11 +16,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2, norm
-
 from companion.loop.config import LoopConfig
 from companion.offline.campaign.jsonable import to_jsonable
-from companion.offline.campaign.reliability import PROMISE_EDGES, promise_bin
+from companion.offline.campaign.reliability import PromiseTally, promised_probability
 from companion.offline.slack import slack_report
 
 logger = logging.getLogger(__name__)
@@ -67,13 +65,16 @@ class EpisodeScore:
     slack_max: float
     slack_violation_contour: float       #: deepest c_min - realised contour at a slack replan (companion.offline.slack)
     slack_violation_m: float             #: ... and the largest missing separation, metres
-    promise_pairs: list[int]             #: tracked in-range pairs per bin of promised p (reliability.PROMISE_EDGES)
+    promise_pairs: list[int]             #: tracked in-range pairs per bin of promised p (reliability.PROMISE_EDGES), estimates' contour
     promise_hits: list[int]              #: ... of which the bodies truly overlapped
     promise_sum: list[float]             #: ... and the sum of their promised p
     solve_times_s: list[float]
     sim_time_s: float
     commands_sha256: str
     truth: dict = field(default_factory=dict)
+    plan_promise_pairs: list[int] = field(default_factory=list)  #: constrained pairs per bin of the plan's promised p at its first step
+    plan_promise_hits: list[int] = field(default_factory=list)   #: ... of which the bodies truly overlapped one step later
+    plan_promise_sum: list[float] = field(default_factory=list)  #: ... and the sum of their promised p
 
     #: Per-step lists pooled into the summary and left out of the JSON report's rows.
     POOLED = ("solve_times_s", "drone_nees", "relative_nees", "model_step_error_m")
@@ -90,6 +91,21 @@ class EpisodeScore:
         return cls(**{k: v for k, v in row.items() if k in names})
 
 
+def _truth_one_step_later(replan_truth: list, step: float) -> list:
+    """For each replan, the truth at the replan ``step`` seconds later (``None`` when there was none)."""
+    out = []
+    for i, (t, _, _) in enumerate(replan_truth):
+        later = None
+        for j in range(i + 1, len(replan_truth)):
+            dt = replan_truth[j][0] - t
+            if abs(dt - step) < 1e-6:
+                later = replan_truth[j]
+            if dt > step + 1e-6:
+                break
+        out.append(later)
+    return out
+
+
 def score_run(run: Any, data: dict) -> EpisodeScore:
     """Per-episode metrics from a :class:`~companion.offline.harness.RunResult` and its scenario dict.
 
@@ -99,7 +115,9 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
     twice). An obstacle is *in range* at a step when its true centre distance is within
     sensing range; a *step collision* is an in-range obstacle whose true distance is below the
     sum of the physical radii. The realised contour of touch (from the estimates,
-    ``ReplanRecord.realised_contour``) is counted for tracked obstacles within range.
+    ``ReplanRecord.realised_contour``) is counted for tracked obstacles within range. The
+    plan's promise (``ReplanRecord.planned_contour``, its first step) is scored against the
+    truth at the replan ``step_s`` later (the time of that step), when there is one.
     """
     truth = run.truth
     comp = run.companion
@@ -122,13 +140,18 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
     drone_nees: list[float] = []
     rel_nees: list[float] = []
     model_err: list[float] = []
-    n_bins = len(PROMISE_EDGES) - 1
-    promise_pairs, promise_hits, promise_sum = [0] * n_bins, [0] * n_bins, [0.0] * n_bins
+    estimates_promise, plan_promise = PromiseTally(), PromiseTally()
+    truth_next = _truth_one_step_later(replan_truth, step)
     prev = None  # (t, true drone position, planned displacement over the first step)
     last_t = -math.inf
-    for rec, (_, p_true, obs_true) in zip(records, replan_truth):
+    for rec, (_, p_true, obs_true), after in zip(records, replan_truth, truth_next):
         if rec.t_link_s < last_t + period - 1e-6:
             continue
+        if after is not None:
+            for key, ct in rec.planned_contour.items():
+                j = key[0] - sysid_base
+                if 0 <= j < len(names):
+                    plan_promise.add(promised_probability(ct), bool(np.linalg.norm(after[2][names[j]] - after[1]) < radius_sum[j]))
         if prev is not None and abs(rec.t_link_s - prev[0] - step) < 1e-6:
             # model mismatch: true displacement over one step against the planner's tau * V_1
             model_err.append(float(np.linalg.norm((p_true - prev[1]) - prev[2])))
@@ -151,8 +174,7 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
                 continue
             contour_pairs += 1
             min_contour = min(min_contour, ct)
-            # Phi(-r) with r = sqrt(chi2_3.ppf(c)): 1/2 for c = 0 (ellipsoids overlap), 0 for c = 1
-            promise = float(norm.cdf(-math.sqrt(chi2.ppf(min(max(ct, 0.0), 1.0), 3))))
+            promise = promised_probability(ct)
             bound_sum += promise
             if ct < c_min:
                 contour_below += 1
@@ -162,10 +184,7 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
                 rel_true = obs_true[names[j]] - p_true
                 err = rel_est - rel_true
                 rel_nees.append(float(err @ np.linalg.solve(rec.drone_cov + rec.obstacle_covs[key], err)))
-                b = promise_bin(promise)
-                promise_pairs[b] += 1
-                promise_hits[b] += int(np.linalg.norm(rel_true) < radius_sum[j])
-                promise_sum[b] += promise
+                estimates_promise.add(promise, bool(np.linalg.norm(rel_true) < radius_sum[j]))
                 if ct < ACTIVE_CONTOUR:
                     active_pairs += 1
                     active_hits += int(np.linalg.norm(rel_true) < radius_sum[j])
@@ -207,9 +226,12 @@ def score_run(run: Any, data: dict) -> EpisodeScore:
         slack_max=max((r.slack_max for r in records if r.status != "failed"), default=0.0),  # failed: inf
         slack_violation_contour=slack.largest_violation_contour,
         slack_violation_m=slack.largest_violation_m,
-        promise_pairs=promise_pairs,
-        promise_hits=promise_hits,
-        promise_sum=promise_sum,
+        promise_pairs=estimates_promise.pairs,
+        promise_hits=estimates_promise.hits,
+        promise_sum=estimates_promise.sums,
+        plan_promise_pairs=plan_promise.pairs,
+        plan_promise_hits=plan_promise.hits,
+        plan_promise_sum=plan_promise.sums,
         solve_times_s=[float(r.solve_time_s) for r in records],
         sim_time_s=float(run.sim_time_s),
         commands_sha256=hashlib.sha256(np.ascontiguousarray(commands).tobytes()).hexdigest(),

@@ -98,8 +98,10 @@ class MethodSummary:
     slack_max: float
     slack_violation_contour_max: float  #: deepest c_min - realised contour at a slack replan, any episode
     slack_violation_m_max: float  #: largest missing separation at a slack replan, metres
-    reliability: tuple[ReliabilityBin, ...]  #: promised against observed, per bin of promised p
+    reliability: tuple[ReliabilityBin, ...]  #: the estimates' promise against observed, per bin of promised p
     observed_over_promised: float | None  #: hits over the sum of promised p (tracked in-range pairs)
+    plan_reliability: tuple[ReliabilityBin, ...]  #: the plan's promise (first step) against the truth one step later
+    plan_observed_over_promised: float | None
     solve_time_median_ms: float | None
     solve_time_p99_ms: float | None
     min_realised_contour: list[float | None]  #: one per episode (None: nothing came within range)
@@ -107,6 +109,19 @@ class MethodSummary:
     def to_json(self) -> dict:
         """Plain JSON values (intervals as lists, non-finite numbers as ``None``)."""
         return to_jsonable(self)
+
+
+def _pooled_bins(rows: Sequence[Any], prefix: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-bin pairs, hits and promised sums of ``{prefix}_pairs`` etc. summed over episode scores
+    (rows written before a tally existed hold empty lists and add nothing)."""
+    n_bins = len(PROMISE_EDGES) - 1
+    pairs, hits, sums = np.zeros(n_bins, int), np.zeros(n_bins, int), np.zeros(n_bins)
+    for r in rows:
+        if getattr(r, f"{prefix}_pairs"):
+            pairs += np.asarray(getattr(r, f"{prefix}_pairs"), dtype=int)
+            hits += np.asarray(getattr(r, f"{prefix}_hits"), dtype=int)
+            sums += np.asarray(getattr(r, f"{prefix}_sum"), dtype=float)
+    return pairs, hits, sums
 
 
 def summarise(results: Sequence[Any], methods: Sequence[str], c_min: float) -> dict[str, "MethodSummary"]:
@@ -131,10 +146,8 @@ def summarise(results: Sequence[Any], methods: Sequence[str], c_min: float) -> d
         active_hits = sum(r.active_pair_collisions for r in rows)
         ttg = [r.time_to_goal_s for r in rows if r.goal_reached and r.time_to_goal_s is not None]
         replans = sum(r.replans for r in rows)
-        n_bins = len(PROMISE_EDGES) - 1
-        bin_pairs = np.sum([r.promise_pairs for r in rows], axis=0) if rows else np.zeros(n_bins, int)
-        bin_hits = np.sum([r.promise_hits for r in rows], axis=0) if rows else np.zeros(n_bins, int)
-        bin_sum = np.sum([r.promise_sum for r in rows], axis=0) if rows else np.zeros(n_bins)
+        bin_pairs, bin_hits, bin_sum = _pooled_bins(rows, "promise")
+        plan_pairs, plan_hits, plan_sum = _pooled_bins(rows, "plan_promise")
         out[m] = MethodSummary(
             episodes=n,
             errors=errors,
@@ -180,6 +193,8 @@ def summarise(results: Sequence[Any], methods: Sequence[str], c_min: float) -> d
             slack_violation_m_max=max((r.slack_violation_m for r in rows), default=0.0),
             reliability=reliability_bins(bin_pairs, bin_hits, bin_sum),
             observed_over_promised=observed_over_promised(int(bin_hits.sum()), float(bin_sum.sum())),
+            plan_reliability=reliability_bins(plan_pairs, plan_hits, plan_sum),
+            plan_observed_over_promised=observed_over_promised(int(plan_hits.sum()), float(plan_sum.sum())),
             solve_time_median_ms=float(np.median(solve) * 1e3) if solve.size else None,
             solve_time_p99_ms=float(np.percentile(solve, 99) * 1e3) if solve.size else None,
             min_realised_contour=[r.min_realised_contour for r in rows],

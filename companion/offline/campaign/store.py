@@ -3,12 +3,13 @@
 An interrupted campaign loses at most the runs in flight: ``--resume`` reads the file,
 skips the runs already in it and appends the rest; the summary, table and figures are
 computed from the file. The first line is a header naming what the rows depend on
-(family, seed, ``c_min``, episode duration); resuming with different values is refused.
+(family, seed, ``c_min``, episode duration, noise correlation time); resuming with different values is refused.
 Methods and episode indices may differ between sessions: a campaign can be extended.
 
 Format (one JSON object per line)::
 
-    {"format": "ogccmpc-campaign-results", "version": 3, "family": ..., "seed": ..., "c_min": ..., "duration_s": ...}
+    {"format": "ogccmpc-campaign-results", "version": 4, "family": ..., "seed": ..., "c_min": ..., "duration_s": ...,
+     "noise_correlation_s": ...}
     {"episode": 0, "method": "hyperplane", ..., "wall_time_s": 4.2}
     ...
 """
@@ -27,17 +28,63 @@ from companion.offline.campaign.results import EpisodeResult
 logger = logging.getLogger(__name__)
 
 FORMAT = "ogccmpc-campaign-results"
-VERSION = 3  # 2: slack violation fields in the rows; 3: promise bins
+VERSION = 4  # 2: slack violation fields in the rows; 3: promise bins; 4: the plan's promise bins, obstacle noise correlation
 #: A row longer than this is not one the campaign wrote (bounded reads of a file given on the command line).
 MAX_LINE_BYTES = 16 * 1024 * 1024
 
 
 def campaign_header(family: str, seed: int, c_min: float, duration_s: float,
-                    drone_noise_correlation_s: float = 0.0) -> dict[str, Any]:
+                    noise_correlation_s: float = 0.0) -> dict[str, Any]:
     """The header line: what every row of the file depends on."""
     return {"format": FORMAT, "version": VERSION, "family": family, "seed": int(seed),
             "c_min": float(c_min), "duration_s": float(duration_s),
-            "drone_noise_correlation_s": float(drone_noise_correlation_s)}
+            "noise_correlation_s": float(noise_correlation_s)}
+
+
+def read_results_file(path: str | Path) -> tuple[dict[str, Any], list[EpisodeResult], int]:
+    """Read a results file: its header, its rows (a later row of the same run replaces an
+    earlier one) and the length in bytes of its complete lines (an unfinished last line,
+    left by an interrupted campaign, is dropped with a warning).
+
+    Raises
+    ------
+    ConfigError
+        Not a results file (no header, a line that is not a result row, a line longer than
+        :data:`MAX_LINE_BYTES`); names the file and line.
+    """
+    path = Path(path)
+    header: dict[str, Any] = {}
+    rows: dict[tuple[int, str], EpisodeResult] = {}
+    good = 0
+    try:
+        f = path.open("rb")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the results file ({exc.strerror or exc})") from None
+    with f:
+        for number, raw in enumerate(iter(lambda: f.readline(MAX_LINE_BYTES), b""), start=1):
+            if not raw.endswith(b"\n"):
+                if len(raw) >= MAX_LINE_BYTES:
+                    raise ConfigError(f"{path}:{number}: line longer than {MAX_LINE_BYTES} bytes: not a results file")
+                logger.warning("%s:%d: unfinished last line dropped (the campaign was interrupted)", path, number)
+                break
+            try:
+                doc = json.loads(raw)
+            except ValueError:
+                raise ConfigError(f"{path}:{number}: not a JSON line") from None
+            if number == 1:
+                if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+                    raise ConfigError(f"{path}:1: not a campaign results file (no {FORMAT!r} header)")
+                header = doc
+            else:
+                try:
+                    result = EpisodeResult.from_json(doc)
+                except (KeyError, TypeError, ValueError) as exc:
+                    raise ConfigError(f"{path}:{number}: not a campaign result row ({exc})") from None
+                rows[result.key] = result
+            good += len(raw)
+    if not header:
+        raise ConfigError(f"{path}: empty or unfinished header: not a campaign results file")
+    return header, list(rows.values()), good
 
 
 class ResultsFile:
@@ -78,35 +125,12 @@ class ResultsFile:
 
     def _read(self) -> int:
         """Load the rows; returns the length in bytes of the complete lines."""
-        good = 0
-        with self.path.open("rb") as f:
-            for number, raw in enumerate(iter(lambda: f.readline(MAX_LINE_BYTES), b""), start=1):
-                if not raw.endswith(b"\n"):
-                    if len(raw) >= MAX_LINE_BYTES:
-                        raise ConfigError(f"{self.path}:{number}: line longer than {MAX_LINE_BYTES} bytes: not a results file")
-                    logger.warning("%s:%d: unfinished last line dropped (the campaign was interrupted)", self.path, number)
-                    break
-                try:
-                    doc = json.loads(raw)
-                except ValueError:
-                    raise ConfigError(f"{self.path}:{number}: not a JSON line") from None
-                if number == 1:
-                    self._check_header(doc)
-                else:
-                    try:
-                        result = EpisodeResult.from_json(doc)
-                    except (KeyError, TypeError, ValueError) as exc:
-                        raise ConfigError(f"{self.path}:{number}: not a campaign result row ({exc})") from None
-                    self._rows[result.key] = result
-                good += len(raw)
-        return good
-
-    def _check_header(self, doc: Any) -> None:
-        if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-            raise ConfigError(f"{self.path}:1: not a campaign results file (no {FORMAT!r} header)")
+        header, rows, good = read_results_file(self.path)
         for key, value in self.header.items():
-            if doc.get(key) != value:
-                raise ConfigError(f"{self.path}: was written for {key} = {doc.get(key)!r}, this campaign has {value!r}")
+            if header.get(key) != value:
+                raise ConfigError(f"{self.path}: was written for {key} = {header.get(key)!r}, this campaign has {value!r}")
+        self._rows = {r.key: r for r in rows}
+        return good
 
     def _write(self, doc: dict) -> None:
         self._file.write(json.dumps(doc, default=float, allow_nan=False) + "\n")

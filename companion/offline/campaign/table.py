@@ -58,10 +58,13 @@ def format_table(result: CampaignResult) -> str:
                  f"pairs whose realised contour of touch fell below c_min; failed: share of replans; slack: episodes "
                  f"with slack; {result.wall_time_s:.0f} s on {result.workers} worker(s))")
     for m, s in result.summary.items():
-        used = [b for b in s.reliability if b.pairs]
-        over = [f"[{b.lo:.0e}, {b.hi:.0e})" for b in used if b.exceeds_promise]
-        lines.append(f"{m}: promise against truth over {sum(b.pairs for b in used)} tracked pairs: observed/promised = "
-                     f"{_fmt(s.observed_over_promised, '.3g')}; bins above their promise: {', '.join(over) or 'none'}")
+        for what, bins, ratio in (("plan's promise (first step)", s.plan_reliability, s.plan_observed_over_promised),
+                                  ("estimates' promise", s.reliability, s.observed_over_promised)):
+            used = [b for b in bins if b.pairs]
+            over = [f"[{b.lo:.0e}, {b.hi:.0e}): {b.hits}/{b.pairs} [{b.observed_ci95[0]:.1e}, {b.observed_ci95[1]:.1e}] "
+                    f"against {b.promised_mean:.1e}" for b in used if b.exceeds_promise]
+            lines.append(f"{m}: {what} against truth over {sum(b.pairs for b in used)} pairs, {sum(b.hits for b in used)} hit(s): "
+                         f"observed/promised = {_fmt(ratio, '.3g')}; bins above their promise: {'; '.join(over) or 'none'}")
     for m, s in result.summary.items():
         if s.slack_plans:
             lines.append(f"{m}: {s.slack_plans} slack replan(s) in {s.episodes_with_slack} episode(s), accepted and flagged; "
