@@ -33,11 +33,15 @@ MAX_LINE_BYTES = 16 * 1024 * 1024
 
 
 def campaign_header(family: str, seed: int, c_min: float, duration_s: float,
-                    drone_noise_correlation_s: float = 0.0) -> dict[str, Any]:
-    """The header line: what every row of the file depends on."""
-    return {"format": FORMAT, "version": VERSION, "family": family, "seed": int(seed),
-            "c_min": float(c_min), "duration_s": float(duration_s),
-            "drone_noise_correlation_s": float(drone_noise_correlation_s)}
+                    drone_noise_correlation_s: float = 0.0, vehicle: str = "lag") -> dict[str, Any]:
+    """The header line: what every row of the file depends on (``vehicle`` only when not the
+    default lag, so files written before vehicle profiles existed still resume)."""
+    header = {"format": FORMAT, "version": VERSION, "family": family, "seed": int(seed),
+              "c_min": float(c_min), "duration_s": float(duration_s),
+              "drone_noise_correlation_s": float(drone_noise_correlation_s)}
+    if vehicle != "lag":
+        header["vehicle"] = vehicle
+    return header
 
 
 class ResultsFile:
