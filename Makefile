@@ -5,7 +5,7 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 BSTAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench campaign campaign-test px4-test venv clean
+.PHONY: demo test bench campaign campaign-test realtime-test px4-test venv clean
 
 # PX4 SITL build with start-sih (see docs/PX4.md); `make px4-test` flies the companion against it.
 PX4_SITL_DIR ?= ../shared/px4-sitl
@@ -44,6 +44,10 @@ campaign: $(STAMP)
 
 campaign-test: $(STAMP)
 	$(VENV)/bin/pytest -q -m slow
+
+# Closed loops in wall-clock time over loopback UDP (mavsim and the companion as two processes).
+realtime-test: $(STAMP)
+	$(VENV)/bin/pytest -q -m realtime
 
 px4-test: $(STAMP)
 	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -s -m px4 tests/px4

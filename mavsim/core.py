@@ -94,12 +94,12 @@ class Simulator:
         self.commander = Commander(self.params, cfg.start_mode, cfg.start_armed, self.vehicle,
                                    cfg.arming_delay_s, cfg.offboard_reject_ack)
         tm = TelemetryBuilder(cfg.position_noise_cov_m2, cfg.velocity_noise_cov_m2ps2,
-                              cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m)
+                              cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m, cfg.geoid_separation_m)
         self.autopilot = Autopilot(self.commander, self.params, tm, self.vehicle_links, cfg.stream_rates_hz, cfg.home_alt_m)
         origin = (cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m)
         self.obstacles = [
             ObstacleSystem(ob, scenario.obstacle_sysid_base + i, scenario.obstacle_compid,
-                           np.random.Generator(np.random.PCG64(seeds[1 + i])), i, origin)
+                           np.random.Generator(np.random.PCG64(seeds[1 + i])), i, origin, cfg.geoid_separation_m)
             for i, ob in enumerate(scenario.obstacles)
         ]
         self.recorder = TruthRecorder(scenario)

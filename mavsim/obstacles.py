@@ -117,10 +117,14 @@ class ObstacleSystem:
     rng : its own noise generator.
     index : its position in the scenario (spreads the report phases).
     origin : (lat deg, lon deg, alt m AMSL) of the local frame, for global reports.
+    geoid_separation_m : geoid height above the WGS-84 ellipsoid (m): the messages whose
+        altitude MAVLink defines as WGS-84 ellipsoid height (UTM_GLOBAL_POSITION ``alt``,
+        OPEN_DRONE_ID_LOCATION ``altitude_geodetic``) carry AMSL + this.
     """
 
     def __init__(self, ob: Obstacle, sysid: int, compid: int, rng: np.random.Generator, index: int,
-                 origin: tuple[float, float, float] = (47.397742, 8.545594, 488.0)) -> None:
+                 origin: tuple[float, float, float] = (47.397742, 8.545594, 488.0),
+                 geoid_separation_m: float = 0.0) -> None:
         self.config = ob
         self.name = ob.name
         self.radius_m = ob.radius_m
@@ -128,6 +132,7 @@ class ObstacleSystem:
         self.transport, self.message = ob.transport, ob.message
         self.icao = ob.icao_address if ob.icao_address is not None else 0xA00000 + sysid
         self.origin = origin
+        self.geoid_separation_m = float(geoid_separation_m)
         self.track = ObstacleTrack(ob)
         self.rng = rng
         self._L = noise_factor(ob.measurement_cov_m2)
@@ -220,7 +225,8 @@ class ObstacleSystem:
             vel_acc = max(1, round((self._vel_std or 0.0) * 100))
         time_us = round((_UTC_AT_BOOT_S + clock) * 1e6) % (1 << 64)
         return mavlink2.MAVLink_utm_global_position_message(
-            time_us, bytes(18), round(lat * 1e7), round(lon * 1e7), round(alt * 1000), round(alt * 1000) - round(self.origin[2] * 1000),
+            time_us, bytes(18), round(lat * 1e7), round(lon * 1e7), round((alt + self.geoid_separation_m) * 1000),
+            round(alt * 1000) - round(self.origin[2] * 1000),
             *vel, max(1, round(self._h_std * 1000)), max(1, round(self._v_std * 1000)), vel_acc,
             0, 0, 0, 10, 3, flags)
 
@@ -234,6 +240,6 @@ class ObstacleSystem:
         uas_id = f"OB{self.sysid:03d}".encode().ljust(20, b"\0")
         return mavlink2.MAVLink_open_drone_id_location_message(
             0, 0, uas_id, 2, direction, speed_h, speed_v, round(lat * 1e7), round(lon * 1e7),
-            float(alt), float(alt), 0, float(alt - self.origin[2]),
+            float(alt), float(alt + self.geoid_separation_m), 0, float(alt - self.origin[2]),
             _category(self._h_std, _K95_2D, _ODID_HOR_BOUNDS), _category(self._v_std, _K95_1D, _ODID_VER_BOUNDS),
             0, speed_acc, seconds_after_hour, 1)

@@ -41,7 +41,15 @@ start_mode : str, default ``"AUTO.LOITER"`` airborne, ``"POSCTL"`` on the ground
     One of POSCTL, AUTO.LOITER, AUTO.TAKEOFF, AUTO.LAND, AUTO.RTL, OFFBOARD.
 start_yaw_rad : float, default 0.0
 home_lat_deg, home_lon_deg, home_alt_m : float
-    Geodetic position of the local origin (PX4 SITL default 47.397742, 8.545594, 488.0).
+    Geodetic position of the local origin (PX4 SITL default 47.397742, 8.545594, 488.0);
+    the altitude is above mean sea level (AMSL), like GPS_GLOBAL_ORIGIN's.
+geoid_separation_m : float, default 50.0
+    Height of the geoid (mean sea level) above the WGS-84 ellipsoid at home, metres:
+    ellipsoid height = AMSL + this. GPS_RAW_INT reports it (``alt_ellipsoid``), and
+    traffic whose messages carry ellipsoid heights (UTM_GLOBAL_POSITION ``alt``,
+    OPEN_DRONE_ID_LOCATION ``altitude_geodetic``) is sent with them. The default is an
+    illustrative non-zero value (on Earth it lies between about -106 and +85 m) so that a
+    receiver which confuses the two datums misplaces that traffic vertically.
 arming_delay_s : float, default 0.0
     Arming is denied this long after boot (real PX4 needs a few seconds).
 offboard_reject_ack : int, default 0
@@ -135,6 +143,7 @@ class SimConfig:
     home_lat_deg: float = 47.397742
     home_lon_deg: float = 8.545594
     home_alt_m: float = 488.0
+    geoid_separation_m: float = 50.0
     arming_delay_s: float = 0.0
     offboard_reject_ack: int = 0
     params: dict[str, float] = field(default_factory=dict)
@@ -210,7 +219,7 @@ MAX_MAP_ITEMS = 256
 SIM_KEYS = {
     "vehicle", "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2", "position_noise_correlation_s",
     "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
-    "home_lat_deg", "home_lon_deg", "home_alt_m", "arming_delay_s", "offboard_reject_ack",
+    "home_lat_deg", "home_lon_deg", "home_alt_m", "geoid_separation_m", "arming_delay_s", "offboard_reject_ack",
     "params", "stream_rates_hz",
 }
 WORLD_KEYS = {"obstacles", "obstacle_sysid_base", "obstacle_compid"}
@@ -367,6 +376,7 @@ def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
         home_lat_deg=s.number("home_lat_deg", 47.397742, lo=-89.0, hi=89.0),
         home_lon_deg=s.number("home_lon_deg", 8.545594, lo=-180.0, hi=180.0),
         home_alt_m=s.number("home_alt_m", 488.0, lo=-500.0, hi=9000.0),
+        geoid_separation_m=s.number("geoid_separation_m", 50.0, lo=-120.0, hi=120.0),
         arming_delay_s=s.number("arming_delay_s", 0.0, lo=0.0, hi=60.0),
         offboard_reject_ack=s.integer("offboard_reject_ack", 0, lo=0, hi=4),
         params=params,

@@ -34,11 +34,12 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "ATTITUDE": 30.0,
     "GLOBAL_POSITION_INT": 50.0,
     "HOME_POSITION": 0.5,
+    "GPS_RAW_INT": 0.0,  # off unless set or requested (MAV_CMD_REQUEST_MESSAGE 24)
 }
 #: Stream name -> MAVLink message id.
 STREAM_IDS: dict[str, int] = {
     "HEARTBEAT": 0, "SYS_STATUS": 1, "ATTITUDE": 30, "LOCAL_POSITION_NED": 32, "GLOBAL_POSITION_INT": 33,
-    "HOME_POSITION": 242, "EXTENDED_SYS_STATE": 245, "ODOMETRY": 331,
+    "HOME_POSITION": 242, "EXTENDED_SYS_STATE": 245, "ODOMETRY": 331, "GPS_RAW_INT": 24,
 }
 MSG_AUTOPILOT_VERSION = 148
 
@@ -90,15 +91,20 @@ class TelemetryBuilder:
     position_cov_m2, velocity_cov_m2ps2 : ndarray (3, 3)
         Noise covariances of the reported estimate (reported in ODOMETRY).
     home_lat_deg, home_lon_deg, home_alt_m : float
-        Geodetic position of the local origin (NED (0, 0, 0), on the ground).
+        Geodetic position of the local origin (NED (0, 0, 0), on the ground); altitude AMSL.
+    geoid_separation_m : float
+        Height of the geoid above the WGS-84 ellipsoid, metres: GPS_RAW_INT reports
+        ``alt_ellipsoid = alt + geoid_separation_m`` as a GNSS receiver does.
     """
 
     def __init__(self, position_cov_m2: np.ndarray, velocity_cov_m2ps2: np.ndarray,
-                 home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> None:
+                 home_lat_deg: float, home_lon_deg: float, home_alt_m: float,
+                 geoid_separation_m: float = 0.0) -> None:
         self._pose_cov = upper_triangle_6x6(position_cov_m2, 1e-4)
         self._vel_cov = upper_triangle_6x6(velocity_cov_m2ps2, 1e-4)
         self.home = (home_lat_deg, home_lon_deg, home_alt_m)
         self._cos_lat = math.cos(math.radians(home_lat_deg))
+        self.geoid_separation_m = float(geoid_separation_m)
 
     def global_from_local(self, p: np.ndarray) -> tuple[int, int, int]:
         """(lat degE7, lon degE7, alt mm AMSL) of a local NED point (flat earth)."""
@@ -129,6 +135,13 @@ class TelemetryBuilder:
             hdg = round(math.degrees(veh.yaw_rad) % 360.0 * 100) % 36000
             return mavlink2.MAVLink_global_position_int_message(
                 ms, lat, lon, alt, round(-est_pos[2] * 1000), *(int(round(x * 100)) for x in est_vel), hdg)
+        if msg_id == 24:
+            lat, lon, alt = self.global_from_local(est_pos)
+            speed = math.hypot(float(est_vel[0]), float(est_vel[1]))
+            cog = round(math.degrees(math.atan2(est_vel[1], est_vel[0])) % 360.0 * 100) % 36000
+            return mavlink2.MAVLink_gps_raw_int_message(
+                now_us, 3, lat, lon, alt, 70, 100, round(speed * 100), cog, 12,
+                alt + round(self.geoid_separation_m * 1000), 700, 1000, 200, 0, 0)
         if msg_id == 1:
             health = _SENSORS | _PREARM
             return mavlink2.MAVLink_sys_status_message(health, health, health, 150, 16200, 500, 90,

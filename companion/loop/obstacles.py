@@ -47,6 +47,10 @@ from companion.mavlink.link import Received
 logger = logging.getLogger(__name__)
 
 MSG_GPS_GLOBAL_ORIGIN = 49
+MSG_GPS_RAW_INT = 24
+_MAX_GEOID_REQUESTS = 5  # an autopilot whose receiver gives no ellipsoid height is not asked forever
+#: Kinds whose altitude is a WGS-84 ellipsoid height: they need the geoid separation.
+ELLIPSOID_KINDS = frozenset({"UTM_GLOBAL_POSITION", "OPEN_DRONE_ID_LOCATION"})
 _ORIGIN_REQUEST_PERIOD_S = 2.0
 _DUPLICATE_WINDOW_S = 1.0
 _DUPLICATE_LATLON_LSB = 2  # PX4 truncates lat/lon of what it re-streams by about 1 cm (1 LSB)
@@ -118,6 +122,14 @@ class ObstacleIntake:
         self._announced = 0
         self._origin_wanted = False
         self._last_origin_request = -math.inf
+        self._measured_geoid_m: float | None = None  # from the autopilot's GPS_RAW_INT
+        self._geoid_wanted = False
+        self._last_geoid_request = -math.inf
+        self._geoid_requests = 0
+
+    def geoid_separation_m(self) -> float | None:
+        """Geoid above the WGS-84 ellipsoid (m): the autopilot's GPS_RAW_INT, else configured, else None."""
+        return self._measured_geoid_m if self._measured_geoid_m is not None else self.config.geoid_separation_m
 
     # ------------------------------------------------------------------ inbound
 
@@ -127,9 +139,19 @@ class ObstacleIntake:
         mtype = rx.msg.get_type()
         key = messages.source_key(rx.msg)
         on_autopilot_link = link == AUTOPILOT_LINK
+        if mtype == "GPS_RAW_INT":
+            if on_autopilot_link and autopilot is not None and key[0] == autopilot[0]:
+                n = traffic.geoid_separation(rx.msg)
+                if n is not None and n != self._measured_geoid_m:
+                    logger.info("geoid separation %.2f m (GPS_RAW_INT alt_ellipsoid - alt)", n)
+                    self._measured_geoid_m = n
+                    self._geoid_wanted = False
+                    if self.origin is not None:
+                        self.origin = traffic.GlobalOrigin(self.origin.lat_deg, self.origin.lon_deg, self.origin.alt_m, n)
+            return False  # the vehicle side may use it too
         if mtype == "GPS_GLOBAL_ORIGIN":
             if on_autopilot_link and autopilot is not None and key[0] == autopilot[0]:
-                origin = traffic.decode_origin(rx.msg)
+                origin = traffic.decode_origin(rx.msg, self.geoid_separation_m())
                 if origin != self.origin:
                     logger.info("GPS_GLOBAL_ORIGIN %.7f %.7f %.2f m", origin.lat_deg, origin.lon_deg, origin.alt_m)
                 self.origin = origin
@@ -176,6 +198,8 @@ class ObstacleIntake:
             return
         if mtype in traffic.GLOBAL_KINDS and self.origin is None:
             self._origin_wanted = True
+        if mtype in ELLIPSOID_KINDS and self._measured_geoid_m is None:
+            self._geoid_wanted = True  # ask the autopilot even when one is configured: its receiver knows better
         decoded = traffic.decode_traffic(msg, self.origin)
         if isinstance(decoded, messages.Rejected):
             self._reject(source, f"{mtype} {_reason_code(decoded.reason)}", rx.t_s)
@@ -251,12 +275,26 @@ class ObstacleIntake:
         """(messages to send, (severity, text) to announce) at link time ``t_s``.
 
         Requests GPS_GLOBAL_ORIGIN (MAV_CMD_REQUEST_MESSAGE 49) while global traffic waits
-        for it, every 2 s; summarises new rejections in one STATUSTEXT per period.
+        for it, and GPS_RAW_INT (24, for the geoid separation) while ellipsoid-height traffic
+        has none measured, each every 2 s; summarises new rejections in one STATUSTEXT per period.
         """
         out: list = []
         if self._origin_wanted and autopilot is not None and t_s - self._last_origin_request >= _ORIGIN_REQUEST_PERIOD_S:
             self._last_origin_request = t_s
             out.append(messages.command_long(mavlink2.MAV_CMD_REQUEST_MESSAGE, (MSG_GPS_GLOBAL_ORIGIN,),
+                                             target_system=autopilot[0], target_component=autopilot[1]))
+        if self._geoid_wanted and autopilot is not None and t_s - self._last_geoid_request >= _ORIGIN_REQUEST_PERIOD_S \
+                and self._geoid_requests < _MAX_GEOID_REQUESTS:
+            self._last_geoid_request = t_s
+            self._geoid_requests += 1
+            if self._geoid_requests == _MAX_GEOID_REQUESTS:
+                text = ("no geoid separation from the autopilot (GPS_RAW_INT alt_ellipsoid) after "
+                        f"{_MAX_GEOID_REQUESTS} requests: " + ("using [traffic] geoid_separation_m"
+                        if self.config.geoid_separation_m is not None else
+                        "UTM and Remote ID reports stay rejected; set [traffic] geoid_separation_m"))
+                logger.warning("%s", text)
+                self.warnings.append(text)
+            out.append(messages.command_long(mavlink2.MAV_CMD_REQUEST_MESSAGE, (MSG_GPS_RAW_INT,),
                                              target_system=autopilot[0], target_component=autopilot[1]))
         texts, self._texts = self._texts, []
         total = sum(self.rejected.values())
@@ -277,5 +315,6 @@ class ObstacleIntake:
             "clock_restarts": dict(self.restarts),
             "future_clamped": dict(self.clamped),
             "origin": None if self.origin is None else [self.origin.lat_deg, self.origin.lon_deg, self.origin.alt_m],
+            "geoid_separation_m": self.geoid_separation_m(),
             "warnings": list(self.warnings),
         }

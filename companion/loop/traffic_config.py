@@ -13,6 +13,8 @@ Example (every key optional)::
     clock_window_s = 10.0         # see companion.loop.clocks
     clock_jump_s = 1.0
     statustext_period_s = 5.0     # at most one rejection STATUSTEXT per period
+    geoid_separation_m = 47.0     # geoid above the WGS-84 ellipsoid here (m); only used until the
+                                  # autopilot's GPS_RAW_INT (alt_ellipsoid - alt) is heard
 
     [[traffic.source]]            # per-source overrides, the first match wins
     link = "obstacles"            # "autopilot", "obstacles" (any obstacle link) or a link name ("obstacles1")
@@ -22,6 +24,13 @@ Example (every key optional)::
     position_std_m = 0.2
     radius_m = 0.5                # body radius of obstacles from this source (default [companion] obstacle_radius_m;
                                   # ADSB emitter types give their own unless a source sets it)
+
+Altitude datums. GPS_GLOBAL_ORIGIN, GLOBAL_POSITION_INT and ADSB_VEHICLE carry altitudes
+above mean sea level; UTM_GLOBAL_POSITION (``alt``) and OPEN_DRONE_ID_LOCATION
+(``altitude_geodetic``) carry heights above the WGS-84 ellipsoid. The two differ by the geoid
+separation (-106 to +85 m on Earth), which the companion takes from the autopilot's
+GPS_RAW_INT (requested when needed) or, failing that, from ``geoid_separation_m``; with
+neither, ellipsoid-height reports are rejected and counted rather than misplaced vertically.
 
 ODOMETRY from other systems on the autopilot link is the old same-socket wiring: allow it
 only explicitly (``autopilot_link_kinds = ["ADSB_VEHICLE", "ODOMETRY"]``); it is dangerous
@@ -87,6 +96,7 @@ class TrafficConfig:
     clock_window_s: float = 10.0
     clock_jump_s: float = 1.0
     statustext_period_s: float = 5.0
+    geoid_separation_m: float | None = None
     sources: tuple[SourceRule, ...] = field(default_factory=tuple)
 
     def policy(self, link: str, system: int, icao: int | None = None) -> SourcePolicy:
@@ -99,7 +109,8 @@ class TrafficConfig:
 
 
 _KEYS = frozenset({"obstacle_links", "autopilot_link_kinds", "obstacle_link_kinds", "position_std_m", "vertical_std_m",
-                   "velocity_std_mps", "clock_window_s", "clock_jump_s", "statustext_period_s", "source"})
+                   "velocity_std_mps", "clock_window_s", "clock_jump_s", "statustext_period_s", "geoid_separation_m",
+                   "source"})
 _SOURCE_KEYS = frozenset({"link", "system", "icao", "kinds", "position_std_m", "vertical_std_m", "velocity_std_mps",
                           "radius_m"})
 #: Bounds on what a scenario file may ask for (every list read from the file is bounded).
@@ -170,6 +181,8 @@ def traffic_from_toml(table: Any, where: str) -> TrafficConfig:
         for key in ("clock_window_s", "clock_jump_s", "statustext_period_s"):
             if key in table:
                 values[key] = check.number(key, table[key], positive=True, hi=_MAX_PERIOD_S)
+        if "geoid_separation_m" in table:
+            values["geoid_separation_m"] = check.number("geoid_separation_m", table["geoid_separation_m"], lo=-120.0, hi=120.0)
     except ConfigError as exc:
         raise ConfigError(f"{where}: {exc}") from None
     base = TrafficConfig(**values)  # the section's own defaults are the sources' defaults

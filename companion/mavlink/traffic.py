@@ -34,7 +34,15 @@ equidistant projection on a sphere of 6,371 km about the local origin (PX4
 ``lib/geo``). :func:`global_to_ned` is the same projection (the forward map is
 ``mavsim.geo.ned_to_global``), so a position PX4 re-streams comes back where PX4 had it
 (a WGS-84 model would differ by 0.29 %).
-Altitudes are AMSL: NED z = origin altitude - altitude.
+Altitudes. NED z = origin altitude - altitude above mean sea level (AMSL).
+GPS_GLOBAL_ORIGIN, GLOBAL_POSITION_INT and ADSB_VEHICLE carry AMSL altitudes;
+UTM_GLOBAL_POSITION ``alt`` and OPEN_DRONE_ID_LOCATION ``altitude_geodetic`` carry heights
+above the WGS-84 ellipsoid (MAVLink: "Altitude (WGS84)"), which exceed AMSL by the geoid
+separation N (-106 to +85 m on Earth): AMSL = ellipsoid height - N, with N from
+:attr:`GlobalOrigin.geoid_separation_m`. Without it such reports are rejected: taken as
+AMSL, traffic at the drone's own altitude would be placed up to a hundred metres away
+vertically. A Remote ID report with only a barometric (pressure) altitude is rejected
+too: pressure altitude is referenced to 1013.25 hPa, not to sea level.
 """
 
 from __future__ import annotations
@@ -96,11 +104,16 @@ GLOBAL_KINDS = frozenset({"GLOBAL_POSITION_INT", "ADSB_VEHICLE", "UTM_GLOBAL_POS
 
 @dataclass(frozen=True)
 class GlobalOrigin:
-    """The local frame's origin (GPS_GLOBAL_ORIGIN): degrees and metres AMSL."""
+    """The local frame's origin (GPS_GLOBAL_ORIGIN): degrees and metres AMSL.
+
+    ``geoid_separation_m`` is the geoid's height above the WGS-84 ellipsoid (metres; from
+    the autopilot's GPS_RAW_INT ``alt_ellipsoid - alt`` or configured), None while unknown.
+    """
 
     lat_deg: float
     lon_deg: float
     alt_m: float
+    geoid_separation_m: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,9 +183,29 @@ def global_to_ned(lat_deg: float, lon_deg: float, alt_m: float, origin: GlobalOr
     return np.array([north, east, origin.alt_m - alt_m])
 
 
-def decode_origin(msg: mavlink2.MAVLink_gps_global_origin_message) -> GlobalOrigin:
+def decode_origin(msg: mavlink2.MAVLink_gps_global_origin_message,
+                  geoid_separation_m: float | None = None) -> GlobalOrigin:
     """GPS_GLOBAL_ORIGIN (degE7, mm AMSL) to :class:`GlobalOrigin`."""
-    return GlobalOrigin(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+    return GlobalOrigin(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3, geoid_separation_m)
+
+
+def geoid_separation(msg: mavlink2.MAVLink_gps_raw_int_message) -> float | None:
+    """Geoid above ellipsoid (m) from GPS_RAW_INT, or None when the receiver gives no ``alt_ellipsoid``.
+
+    ``alt_ellipsoid`` is 0 when not provided; a fix without 3-D (``fix_type`` < 3) carries no altitude.
+    """
+    if int(msg.fix_type) < 3 or int(msg.alt_ellipsoid) == 0:
+        return None
+    n = (int(msg.alt_ellipsoid) - int(msg.alt)) * 1e-3
+    return n if -120.0 <= n <= 120.0 else None
+
+
+def _ellipsoid_to_ned(msg, lat_e7: int, lon_e7: int, height_m: float, origin: GlobalOrigin) -> np.ndarray | messages.Rejected:
+    """A WGS-84 ellipsoid height to NED through the origin's geoid separation (rejected while unknown)."""
+    if origin.geoid_separation_m is None:
+        return messages._reject(msg, "geoid separation unknown for an ellipsoid altitude (no GPS_RAW_INT "
+                                     "alt_ellipsoid from the autopilot, no [traffic] geoid_separation_m)")
+    return global_to_ned(lat_e7 * 1e-7, lon_e7 * 1e-7, height_m - origin.geoid_separation_m, origin)
 
 
 # --------------------------------------------------------------------------- decoders
@@ -243,7 +276,9 @@ def decode_utm_global_position(msg, origin: GlobalOrigin | None) -> Decoded:
     flags = int(msg.flags)
     if not flags & UTM_POSITION_AVAILABLE or not flags & UTM_ALTITUDE_AVAILABLE:
         return messages._reject(msg, "position or altitude not available (UTM_DATA_AVAIL_FLAGS)")
-    pos = global_to_ned(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, origin)
+    pos = _ellipsoid_to_ned(msg, msg.lat, msg.lon, msg.alt * 1e-3, origin)  # alt: WGS-84 ellipsoid height
+    if isinstance(pos, messages.Rejected):
+        return pos
     h, v = msg.h_acc * 1e-3, msg.v_acc * 1e-3
     pos_cov = np.diag([h * h, h * h, v * v]) if h > 0 and v > 0 else None
     vel, vel_cov, vz_unknown = None, None, False
@@ -273,12 +308,13 @@ def decode_open_drone_id_location(msg, origin: GlobalOrigin | None) -> Decoded:
         return messages._reject(msg, "no GPS_GLOBAL_ORIGIN yet")
     if msg.latitude == 0 and msg.longitude == 0:
         return messages._reject(msg, "position unknown (latitude and longitude 0)")
-    alt = msg.altitude_geodetic if msg.altitude_geodetic > ODID_UNKNOWN_ALTITUDE else msg.altitude_barometric
-    if not alt > ODID_UNKNOWN_ALTITUDE:
-        return messages._reject(msg, "altitude unknown (-1000)")
+    if not msg.altitude_geodetic > ODID_UNKNOWN_ALTITUDE:  # also NaN
+        return messages._reject(msg, "geodetic altitude unknown (-1000; pressure altitude has no sea-level datum)")
     if msg.timestamp >= ODID_UNKNOWN_TIMESTAMP or not math.isfinite(msg.timestamp):
         return messages._reject(msg, "timestamp unknown (0xFFFF)")
-    pos = global_to_ned(msg.latitude * 1e-7, msg.longitude * 1e-7, float(alt), origin)
+    pos = _ellipsoid_to_ned(msg, msg.latitude, msg.longitude, float(msg.altitude_geodetic), origin)
+    if isinstance(pos, messages.Rejected):
+        return pos
     sh = _odid_std(msg.horizontal_accuracy, ODID_HORIZONTAL_BOUND_M, K95_2D)
     sv = _odid_std(msg.vertical_accuracy, ODID_VERTICAL_BOUND_M, K95_1D)
     pos_cov = np.diag([sh * sh, sh * sh, sv * sv]) if sh is not None and sv is not None else None

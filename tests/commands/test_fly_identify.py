@@ -46,7 +46,7 @@ def test_that_no_autopilot_is_one_line_after_the_bounded_wait(capsys, tmp_path, 
     assert code == 2 and "no autopilot HEARTBEAT" in err and err.count("\n") == 1
 
 
-@pytest.mark.slow
+@pytest.mark.realtime
 def test_that_the_identification_flight_against_the_px4_profile_identifies_its_two_part_response(capsys, tmp_path):
     api = _free_port()
     sim = Simulator(scenario_from_dict({"vehicle": {"start_ned_m": [0.0, 0.0, 0.0]}, "sim": {"vehicle": "px4"}}),

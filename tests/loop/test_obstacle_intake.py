@@ -115,6 +115,44 @@ def test_that_a_report_before_the_vehicle_clock_is_known_is_counted():
     assert it.summary()["rejected"] == {"obstacles1 sys 101: vehicle time unknown": 1}
 
 
+def utm(north, geoid_m):
+    lat, lon, alt = ned_to_global(north, 0.0, -5.0, *ORIGIN)
+    return mavlink2.MAVLink_utm_global_position_message(
+        1_767_226_200_000_000, bytes(18), round(lat * 1e7), round(lon * 1e7), round((alt + geoid_m) * 1000), 5000,
+        0, 0, 0, 300, 500, 0, 0, 0, 0, 10, 3, 1 | 4 | 8)
+
+
+def gps_raw_int(geoid_m):
+    return mavlink2.MAVLink_gps_raw_int_message(0, 3, round(ORIGIN[0] * 1e7), round(ORIGIN[1] * 1e7), round(ORIGIN[2] * 1e3),
+                                                70, 100, 0, 0, 12, round((ORIGIN[2] + geoid_m) * 1e3))
+
+
+def test_that_ellipsoid_height_traffic_waits_for_the_autopilots_geoid_separation_and_asks_for_it():
+    it = intake()
+    it.claims(rx(origin_msg(), 1, 1, 200.0), AP)
+    it.claims(rx(utm(10.0, 47.3), 101, 1, 200.1, link="obstacles1"), AP)
+    assert "geoid separation unknown" in next(iter(it.summary()["rejected"]))
+    (cmd,) = it.outbound(200.2, AP)[0]
+    assert cmd.command == mavlink2.MAV_CMD_REQUEST_MESSAGE and cmd.param1 == 24 and (cmd.target_system, cmd.target_component) == AP
+    assert not it.claims(rx(gps_raw_int(47.3), 1, 1, 200.3), AP)  # read, and left to the vehicle side too
+    assert it.summary()["geoid_separation_m"] == pytest.approx(47.3)
+    it.claims(rx(utm(10.0, 47.3), 101, 1, 200.4, link="obstacles1"), AP)
+    (key,) = it.tracker.keys()
+    assert np.allclose(it.tracker.state(key).position, [10.0, 0.0, -5.0], atol=0.05)  # 5 m up, not 42 m below ground
+    assert it.outbound(203.0, AP)[0] == []  # measured: no more requests
+
+
+def test_that_a_configured_geoid_separation_serves_until_the_autopilot_gives_one_and_requests_are_bounded():
+    it = intake(TrafficConfig(geoid_separation_m=20.0))
+    it.claims(rx(origin_msg(), 1, 1, 200.0), AP)
+    it.claims(rx(utm(10.0, 20.0), 101, 1, 200.1, link="obstacles1"), AP)
+    assert it.summary()["rejected"] == {} and it.summary()["geoid_separation_m"] == 20.0
+    sent = sum(len(it.outbound(200.0 + 2.0 * k, AP)[0]) for k in range(20))
+    assert sent == 5 and any("geoid" in w for w in it.warnings)  # asked 5 times, then said so once
+    with pytest.raises(ConfigError, match=r"geoid_separation_m = 300\.0"):
+        traffic_from_toml({"geoid_separation_m": 300.0}, "f.toml [traffic]")
+
+
 def test_that_bad_traffic_settings_name_the_file_and_key():
     with pytest.raises(ConfigError, match=r"f\.toml \[traffic\]: position_std_m = -1\.0 must be positive"):
         traffic_from_toml({"position_std_m": -1.0}, "f.toml [traffic]")

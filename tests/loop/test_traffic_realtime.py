@@ -44,7 +44,7 @@ def test_that_odometry_on_an_obstacle_link_from_offset_drifting_clocks_is_flown_
     _check_flight(_realtime_demo(antipodal_variant("odometry_clocks", tmp_path), capsys), 3)
 
 
-@pytest.mark.slow
+@pytest.mark.realtime
 @pytest.mark.parametrize("name", ["adsb", "remote_id"])
 def test_that_adsb_through_the_autopilot_and_remote_id_are_flown_safely_in_real_time(name, tmp_path, capsys):
     summary = _realtime_demo(antipodal_variant(name, tmp_path), capsys)

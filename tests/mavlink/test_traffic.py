@@ -11,7 +11,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.mavlink import messages, traffic
 from mavsim.geo import ned_to_global
 
-ORIGIN = traffic.GlobalOrigin(47.397742, 8.545594, 488.0)
+N = 47.3  # geoid above the WGS-84 ellipsoid at the origin, metres (any non-zero value)
+ORIGIN = traffic.GlobalOrigin(47.397742, 8.545594, 488.0, N)
 
 
 def packed(msg, sysid=1, compid=1):
@@ -56,7 +57,7 @@ def test_that_the_adsb_emitter_type_sets_a_radius_and_a_uav_leaves_it_to_the_con
 def test_that_utm_accuracies_are_standard_deviations():
     lat, lon, alt = ned_to_global(3.0, 4.0, -5.0, ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m)
     msg = packed(mavlink2.MAVLink_utm_global_position_message(
-        1_767_226_200_000_000, bytes(18), round(lat * 1e7), round(lon * 1e7), round(alt * 1000), 5000,
+        1_767_226_200_000_000, bytes(18), round(lat * 1e7), round(lon * 1e7), round((alt + N) * 1000), 5000,
         100, -50, 20, 300, 500, 40, 0, 0, 0, 10, 3, 1 | 4 | 8 | 32 | 64), 7)
     r = traffic.decode_utm_global_position(msg, ORIGIN)
     assert np.allclose(r.position_ned, [3.0, 4.0, -5.0], atol=0.01)
@@ -73,7 +74,7 @@ def test_that_remote_id_accuracy_categories_are_95_percent_bounds(hor, ver, spee
     lat, lon, alt = ned_to_global(-2.0, 6.0, -10.0, ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m)
     msg = packed(mavlink2.MAVLink_open_drone_id_location_message(
         0, 0, b"OB101".ljust(20, b"\0"), 2, 18000, 200, 100, round(lat * 1e7), round(lon * 1e7),
-        float(alt), float(alt), 0, 10.0, hor, ver, 0, speed, 612.3, 1), 9)
+        float(alt), float(alt + N), 0, 10.0, hor, ver, 0, speed, 612.3, 1), 9)
     r = traffic.decode_open_drone_id_location(msg, ORIGIN)
     assert np.allclose(r.position_ned, [-2.0, 6.0, -10.0], atol=0.01)
     assert np.allclose(np.sqrt(np.diag(r.position_cov)), [sh, sh, sv], rtol=1e-3)
@@ -84,12 +85,42 @@ def test_that_remote_id_accuracy_categories_are_95_percent_bounds(hor, ver, spee
 
 def test_that_remote_id_with_unknown_accuracy_leaves_it_to_the_configuration_and_unknown_fields_reject():
     lat, lon, alt = ned_to_global(1.0, 1.0, -1.0, ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m)
-    args = [0, 0, bytes(20), 2, 36100, 25500, 6300, round(lat * 1e7), round(lon * 1e7), float(alt), float(alt), 0, 1.0, 0, 0, 0, 0, 10.0, 0]
+    args = [0, 0, bytes(20), 2, 36100, 25500, 6300, round(lat * 1e7), round(lon * 1e7), float(alt), float(alt + N), 0, 1.0, 0, 0, 0, 0, 10.0, 0]
     r = traffic.decode_open_drone_id_location(packed(mavlink2.MAVLink_open_drone_id_location_message(*args), 9, 1), ORIGIN)
     assert r.position_cov is None and r.velocity_ned is None and r.identity == ("system", 9, 1)
     args[9] = args[10] = -1000.0
     rej = traffic.decode_open_drone_id_location(packed(mavlink2.MAVLink_open_drone_id_location_message(*args), 9), ORIGIN)
     assert isinstance(rej, messages.Rejected) and "altitude" in rej.reason
+
+
+def test_that_ellipsoid_heights_are_brought_to_sea_level_by_the_geoid_separation_and_rejected_without_one():
+    """UTM ``alt`` and Remote ID ``altitude_geodetic`` are WGS-84 ellipsoid heights; the origin is AMSL."""
+    lat, lon, alt = ned_to_global(0.0, 0.0, -5.0, ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m)  # 5 m above home
+    utm = packed(mavlink2.MAVLink_utm_global_position_message(
+        1, bytes(18), round(lat * 1e7), round(lon * 1e7), round((alt + N) * 1000), 5000, 0, 0, 0, 300, 500, 0,
+        0, 0, 0, 10, 3, 1 | 4 | 8), 7)
+    odid = packed(mavlink2.MAVLink_open_drone_id_location_message(
+        0, 0, bytes(20), 2, 36100, 25500, 6300, round(lat * 1e7), round(lon * 1e7), float(alt), float(alt + N),
+        0, 5.0, 12, 6, 0, 0, 10.0, 1), 9)
+    for msg in (utm, odid):
+        r = traffic.decode_traffic(msg, ORIGIN)
+        assert r.position_ned[2] == pytest.approx(-5.0, abs=0.01)  # not 47 m lower, as taken for AMSL it would be
+        unknown = traffic.decode_traffic(msg, traffic.GlobalOrigin(ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m))
+        assert isinstance(unknown, messages.Rejected) and "geoid separation unknown" in unknown.reason
+    only_pressure = packed(mavlink2.MAVLink_open_drone_id_location_message(
+        0, 0, bytes(20), 2, 36100, 25500, 6300, round(lat * 1e7), round(lon * 1e7), float(alt), -1000.0,
+        0, 5.0, 12, 6, 0, 0, 10.0, 1), 9)
+    rej = traffic.decode_traffic(only_pressure, ORIGIN)
+    assert isinstance(rej, messages.Rejected) and "geodetic altitude unknown" in rej.reason
+
+
+@pytest.mark.parametrize("fix, alt_ellipsoid, expected", [(3, 488_000 + 47_300, 47.3), (3, 0, None), (2, 535_300, None),
+                                                         (3, 488_000 + 500_000, None)])
+def test_that_the_geoid_separation_comes_from_gps_raw_int_only_with_a_3d_fix_and_a_plausible_ellipsoid_height(
+        fix, alt_ellipsoid, expected):
+    msg = mavlink2.MAVLink_gps_raw_int_message(0, fix, 473977420, 85455940, 488_000, 70, 100, 0, 0, 12, alt_ellipsoid)
+    got = traffic.geoid_separation(msg)
+    assert got == (None if expected is None else pytest.approx(expected))
 
 
 def test_that_global_position_int_of_another_vehicle_goes_through_the_origin():

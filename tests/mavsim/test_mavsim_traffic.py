@@ -38,6 +38,23 @@ def test_that_gps_global_origin_is_answered_when_requested():
     assert origin and (origin[0].latitude, origin[0].longitude, origin[0].altitude) == (473977420, 85455940, 488000)
 
 
+def test_that_gps_raw_int_reports_the_ellipsoid_height_and_ellipsoid_kinds_carry_it():
+    """GPS_RAW_INT ``alt_ellipsoid - alt`` is the geoid separation; UTM and Remote ID send ellipsoid heights."""
+    scenario = with_obstacles(AIRBORNE, 2, transport="link", message="UTM_GLOBAL_POSITION")
+    scenario["world"]["obstacles"][1]["message"] = "OPEN_DRONE_ID_LOCATION"
+    scenario.setdefault("sim", {})["geoid_separation_m"] = 31.5
+    c = Client(AIRBORNE | {"sim": {"geoid_separation_m": 31.5}})
+    (raw,) = [m for m in c.command(mavlink2.MAV_CMD_REQUEST_MESSAGE, 24) if m.get_type() == "GPS_RAW_INT"]
+    assert raw.fix_type == 3 and raw.alt_ellipsoid - raw.alt == 31_500
+    sim = LockstepSimulator(scenario)
+    sim.advance(1.0)
+    reports = _parse(sim.take_obstacle_packets())
+    utm = next(m for m in reports if m.get_type() == "UTM_GLOBAL_POSITION")
+    odid = next(m for m in reports if m.get_type() == "OPEN_DRONE_ID_LOCATION")
+    assert utm.alt - utm.relative_alt - 488_000 == 31_500  # relative_alt is above home, alt is ellipsoid height
+    assert odid.altitude_geodetic - odid.altitude_barometric == pytest.approx(31.5, abs=1e-3)
+
+
 @pytest.mark.parametrize("message", ["ODOMETRY", "LOCAL_POSITION_NED", "UTM_GLOBAL_POSITION", "OPEN_DRONE_ID_LOCATION"])
 def test_that_link_obstacles_send_their_message_on_the_obstacle_link_only(message):
     sim = LockstepSimulator(with_obstacles(AIRBORNE, 1, transport="link", message=message))
