@@ -279,7 +279,10 @@ class Companion:
                 limit = self.loop.max_constrained_tracks
                 said.append(self._say(t_s, SEV_NOTICE, f"companion: {left_out} tracks beyond {limit} not constrained"))
         if job.realised_contour:
-            said.append(messages.named_value_float(int(round(t_s * 1000)), "ct_min", min(job.realised_contour.values())))
+            now_min = min(job.realised_contour.values())
+            best = self.state.min_realised_contour
+            self.state.min_realised_contour = now_min if best is None else min(best, now_min)
+            said.append(messages.named_value_float(int(round(t_s * 1000)), "ct_min", now_min))
         self.planning.submit(job)
         return said
 

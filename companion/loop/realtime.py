@@ -33,6 +33,7 @@ from companion.core.planner import Planner, PlannerConfig
 from companion.loop.app import Companion
 from companion.loop.planning import PlanResult
 from companion.loop.request_builder import ReplanJob
+from companion.loop.tlog_marks import TlogMarks
 from companion.mavlink.link import Link
 from companion.mavlink.tlog import TlogWriter
 
@@ -233,6 +234,7 @@ class StreamStats:
     setpoint_gaps_s: list = field(default_factory=list)
     max_tick_s: float = 0.0
     inbound_dropped: int = 0
+    inbound_superseded: int = 0
     inbound_backlog_at_end: int = 0
 
     def note_setpoint(self, t_s: float) -> None:
@@ -256,7 +258,31 @@ class StreamStats:
             "setpoint_gaps_over_150ms": sum(g > gap_limit_s for g in gaps),
             "tick_max_ms": round(self.max_tick_s * 1e3, 1),
             "inbound_dropped": self.inbound_dropped,
+            "inbound_superseded": self.inbound_superseded,
         }
+
+
+def _keep_newest_per_source(queue: deque) -> int:
+    """Drop every waiting message that a newer one of the same kind from the same source supersedes.
+
+    A source is (link, system, component) and a kind the message type; the survivors keep
+    their order. Returns how many were dropped. Run when the obstacle queue backs up: a
+    loop slowed by load (measured on PX4 SITL on a loaded 2-core machine: five obstacle
+    messages handled per loop, 30 arriving per second) would otherwise fall further and
+    further behind, and the tracks would be seconds old (the backlog reached 3 s).
+    """
+    seen: set = set()
+    keep: list = []
+    for rx in reversed(queue):
+        key = (rx.link, rx.msg.get_srcSystem(), rx.msg.get_srcComponent(), rx.msg.get_type())
+        if key not in seen:
+            seen.add(key)
+            keep.append(rx)
+    dropped = len(queue) - len(keep)
+    if dropped:
+        queue.clear()
+        queue.extend(reversed(keep))
+    return dropped
 
 
 def run_realtime(
@@ -279,9 +305,11 @@ def run_realtime(
     Inbound messages wait in two queues: the autopilot's (and every HEARTBEAT) and the
     rest (obstacle traffic). Each loop handles all of the first and as many of the rest as
     fit before the next tick is due (at least ``_MIN_OBSTACLE_MESSAGES``), so a flood of
-    obstacle reports delays neither the setpoints nor the drone's own estimate. Past
-    ``_MAX_BACKLOG`` waiting obstacle messages the oldest are dropped and counted
-    (``StreamStats.inbound_dropped``). The tlog is written here, in the order the
+    obstacle reports delays neither the setpoints nor the drone's own estimate. When more
+    than that wait, only the newest message of each kind from each source is kept (the
+    others counted in ``StreamStats.inbound_superseded``), so the tracks never lag behind
+    a loop slowed by load; past ``_MAX_BACKLOG`` waiting obstacle messages the oldest are
+    dropped and counted (``StreamStats.inbound_dropped``). The tlog is written here, in the order the
     companion handled the messages (each stamped with its arrival), so a replay feeds
     them in that order and reproduces the commands; open the link without a tlog.
 
@@ -296,6 +324,9 @@ def run_realtime(
     tlog : record every message handled and every packet sent.
     obstacle_links : receive-only links carrying traffic (their messages reach the companion
         tagged with the link's name, in the obstacle queue; nothing is ever sent on them).
+
+    The tlog also gets the marks a replay needs (:mod:`companion.loop.tlog_marks`): each
+    tick's time, and the link of each message from an obstacle link.
     """
     if duration_s is not None and not (math.isfinite(duration_s) and duration_s >= 0.0):
         raise ValueError(f"duration_s must be finite seconds >= 0, got {duration_s!r}")
@@ -304,9 +335,12 @@ def run_realtime(
     vehicle: deque = deque()
     others: deque = deque()
 
+    marks = TlogMarks(tlog, link.key) if tlog is not None else None
+
     def handle(rx) -> None:
         companion.handle(rx)
         if tlog is not None:
+            marks.received(rx.t_s, rx.link)
             tlog.write(rx.t_s, rx.raw)
 
     start = clock()
@@ -321,6 +355,8 @@ def run_realtime(
             (vehicle if first else others).append(rx)
         for obstacle_link in obstacle_links:  # obstacle traffic only: never ahead of the autopilot
             others.extend(obstacle_link.poll())
+        if len(others) > _MIN_OBSTACLE_MESSAGES:  # falling behind: only each source's newest report is news
+            stats.inbound_superseded += _keep_newest_per_source(others)
         while len(others) > _MAX_BACKLOG:
             others.popleft()
             stats.inbound_dropped += 1
@@ -333,6 +369,8 @@ def run_realtime(
             handled += 1
         now = clock()
         if now >= next_tick:
+            if marks is not None:
+                marks.tick(now)
             outbox = companion.tick(now)
             for msg in outbox:
                 packet = link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times

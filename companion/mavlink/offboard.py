@@ -117,6 +117,11 @@ class OffboardConfig:
     takeoff_timeout_s : float
         Seconds allowed for the home altitude to arrive, and again from the
         takeoff request to AUTO.LOITER.
+    takeoff_settle_s : float
+        Seconds to leave the vehicle in Hold after the takeoff completes, before
+        streaming: PX4 ends AUTO.TAKEOFF within its altitude acceptance of the
+        target (NAV_MC_ALT_RAD, 0.8 m by default) and closes the rest in Hold
+        (measured on PX4 SITL: 4.67 m at the switch, still climbing toward 5 m).
     reengage : bool
         Request OFFBOARD again after the vehicle left it while engaged.
     hold_after_goal_s : float or None
@@ -132,13 +137,14 @@ class OffboardConfig:
     arm: bool = False
     takeoff_alt_m: float | None = None
     takeoff_timeout_s: float = 30.0
+    takeoff_settle_s: float = 0.0
     reengage: bool = False
     heartbeat_timeout_s: float = 3.0
     hold_after_goal_s: float | None = None
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
-        for name in ("prestream_s", "takeoff_timeout_s"):
+        for name in ("prestream_s", "takeoff_timeout_s", "takeoff_settle_s"):
             set_(name, check.number(name, getattr(self, name), lo=0.0, hi=MAX_OFFBOARD_SECONDS))
         for name in ("retry_period_s", "heartbeat_timeout_s"):
             set_(name, check.number(name, getattr(self, name), positive=True, hi=MAX_OFFBOARD_SECONDS))
@@ -224,6 +230,7 @@ class OffboardSequencer:
         self._pending: _Pending | None = None
         self._was_engaged = False
         self._seen_takeoff_mode = False
+        self._takeoff_done_s: float | None = None  # link time AUTO.LOITER was first seen after the takeoff
         self._home_alt_amsl_m: float | None = None
         self._home_requested_s: float | None = None
         self._goal_s: float | None = None
@@ -397,7 +404,11 @@ class OffboardSequencer:
                 self._send(t_s, messages.takeoff_command(self._takeoff_param7(), **self._tgt()))
             if self._seen_takeoff_mode and hb.mode == "AUTO.LOITER":
                 self._pending = None
-                self._transition(t_s, Phase.PRESTREAM, "takeoff complete (AUTO.LOITER)")
+                if self._takeoff_done_s is None:
+                    self._takeoff_done_s = t_s
+                if t_s - self._takeoff_done_s >= cfg.takeoff_settle_s - 1e-9:
+                    self._transition(t_s, Phase.PRESTREAM, "takeoff complete (AUTO.LOITER)"
+                                     + (f", settled {cfg.takeoff_settle_s:.1f} s" if cfg.takeoff_settle_s else ""))
             elif self._pending is not None and t_s - self._pending.first_s > cfg.takeoff_timeout_s:
                 self._pending = None
                 self._transition(t_s, Phase.GAVE_UP, f"takeoff not complete after {cfg.takeoff_timeout_s:.0f} s",

@@ -23,6 +23,14 @@ setpoint: a streaming companion sends one every tick, so a wider gap there is a 
 ran late in real time) and after the last one up to the end of the log, each after the
 inbound records stamped up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
 
+*Marked* (a log from ``companion fly``, whose real-time loop marks its tlog, see
+:mod:`companion.loop.tlog_marks`). Every tick is marked, those that sent nothing too, and
+every message that came on an obstacle link is marked with that link: the replay ticks
+exactly where the recording did and feeds each message on its own link, inferring
+nothing. Older logs without marks are replayed by the rules above; a real-time one then
+agrees only as far as its silent ticks fall on the grid (the loop's jitter moves them)
+and its links are guessed right (:func:`companion.loop.obstacles.replay_link`).
+
 *What-if* (no companion packets: mavsim's own ``--tlog``, a MAVProxy or QGroundControl
 log). The companion ticks at its setpoint rate over the log's duration, and since no
 vehicle in such a log ever accepted our OFFBOARD request, the offboard sequence is
@@ -81,6 +89,8 @@ from companion.loop.config import load_scenario
 from companion.mavlink.tlog import read_tlog
 from companion.offline.harness import LOCKSTEP_EPOCH_S
 from companion.loop.obstacles import replay_link
+from companion.loop.tlog_marks import TICK, link_name, mark_of
+from companion.loop.traffic_config import AUTOPILOT_LINK
 
 logger = logging.getLogger(__name__)
 
@@ -197,6 +207,12 @@ class _Rec:
     t_us: int  # link time, integer microseconds
     msg: object
     raw: bytes
+    link: str | None = None  # the link it came on, when the recording marked it (else inferred)
+
+
+@dataclass
+class _TickMark:
+    t_us: int  # a tick the recording marked (companion.loop.tlog_marks.TICK)
 
 
 @dataclass
@@ -300,11 +316,21 @@ def replay(
     key = tuple(int(k) for k in companion_key)
     stream: list[tuple[bool, _Rec]] = []
     n_in = n_out = 0
+    next_link: str | None = None
     for t_s, msg in records:
         raw = bytes(msg.get_msgbuf())
         # mavutil stores stamp_us * 1e-6; rounding back recovers the integer exactly.
         rec = _Rec(int(round(t_s * _US)) - offset_us, _reparse(parser, raw, msg), raw)
         out = messages.source_key(rec.msg) == key
+        mark = mark_of(rec.msg) if out else None
+        if mark is not None:  # the recording's own notes (tlog_marks), never sent: a tick, or the next record's link
+            if mark[0] == TICK:
+                stream.append((True, _TickMark(rec.t_us)))
+            else:
+                next_link = link_name(mark[1])
+            continue
+        if not out:
+            rec.link, next_link = next_link, None
         n_out += out
         n_in += not out
         stream.append((out, rec))
@@ -317,14 +343,17 @@ def replay(
         )
 
     period_us = int(round(_US / scenario.loop.setpoint_rate_hz))  # as the harness advances mavsim: round(dt * 1e6)
-    events = _schedule(stream, period_us)
+    marked = any(isinstance(rec, _TickMark) for _, rec in stream)
+    events = _marked_schedule(stream) if marked else _schedule(stream, period_us)
     recorded_ticks = sum(1 for ev in events if isinstance(ev, _Tick) and not ev.silent)
     commands_recorded = sum(1 for ev in events if isinstance(ev, _Tick) and ev.setpoint is not None)
     mode = "compare" if commands_recorded else "what-if"
     if assume_engaged is None:
         assume_engaged = mode == "what-if"
     notes = []
-    if mode == "compare" and not lockstep:
+    if marked:
+        notes.append("ticks and links as the recording marked them (companion.loop.tlog_marks)")
+    elif mode == "compare" and not lockstep:
         notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
 
     realtime_plans = any(arrivals(ev.recorded) for ev in events if isinstance(ev, _Tick))
@@ -341,7 +370,8 @@ def replay(
     unmatched = mismatches = ticks = 0
     for ev in events:
         if isinstance(ev, _Rec):
-            companion.handle(Received(ev.t_us * 1e-6, ev.msg, ev.raw, replay_link(ev.msg, companion.autopilot)))
+            link = (ev.link or AUTOPILOT_LINK) if marked else replay_link(ev.msg, companion.autopilot)
+            companion.handle(Received(ev.t_us * 1e-6, ev.msg, ev.raw, link))
             continue
         t = ev.t_us * 1e-6
         if schedule is not None:
@@ -353,6 +383,8 @@ def replay(
             if mode == "compare":  # the recorded companion sent nothing at this tick
                 mismatches += bool(out)
                 unmatched += sp is not None
+                if out:
+                    logger.debug("silent tick at %.6f s: replayed %s", t, [m.get_type() for m in out])
         elif [m.get_type() for m in out] != [m.get_type() for m in ev.recorded]:
             mismatches += 1
             logger.debug("tick at %.6f s: replayed %s, recorded %s", t, [m.get_type() for m in out],
@@ -409,6 +441,28 @@ def replay(
         path, mode, result.messages, ticks, result.replans, result.commands_compared, max_diff,
     )
     return result
+
+
+def _marked_schedule(stream: list) -> list:
+    """Inbound records and ticks of a log with tick marks: exactly in the recorded order.
+
+    Each tick mark opens a tick; the outbound records after it (up to the next mark or
+    inbound record) are what that tick sent, none for a tick that sent nothing.
+    """
+    events: list = []
+    cur: _Tick | None = None
+    for out, rec in stream:
+        if isinstance(rec, _TickMark):
+            cur = _Tick(rec.t_us)
+            events.append(cur)
+        elif not out:
+            cur = None
+            events.append(rec)
+        elif cur is not None:
+            cur.recorded.append(rec.msg)
+        else:  # a packet outside a marked tick: keep it as a tick of its own (it is compared, so it shows)
+            events.append(_Tick(rec.t_us, [rec.msg]))
+    return events
 
 
 def _schedule(stream: list[tuple[bool, _Rec]], period_us: int) -> list:

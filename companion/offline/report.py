@@ -16,12 +16,12 @@ def companion_report(companion: Companion) -> dict:
     """What the companion itself saw and did (no ground truth needed).
 
     Contours of touch are confidences in [0, 1]; ``min_realised_contour`` is computed from
-    the estimates at each replan, ``min_planned_contour`` from the plans (obstacles in
+    the estimates at every replan request (in real time also those whose plan was superseded
+    or never came back), ``min_planned_contour`` from the applied plans (obstacles in
     sensing range only). Solve times in milliseconds.
     """
     records = companion.records
     solve = np.array([r.solve_time_s for r in records]) if records else np.zeros(0)
-    realised = [min(r.realised_contour.values()) for r in records if r.realised_contour]
     planned = [r.planned_min_contour for r in records if math.isfinite(r.planned_min_contour)]
     statuses = status_counts(r.status for r in records)
     state = companion.state
@@ -36,7 +36,7 @@ def companion_report(companion: Companion) -> dict:
         "plan_status": statuses,
         "replans_with_slack": state.slack_plans,
         "failed_plans": state.failed_plans,
-        "min_realised_contour": min(realised) if realised else None,
+        "min_realised_contour": state.min_realised_contour,  # every request's, not only the applied plans'
         "min_planned_contour": min(planned) if planned else None,
         "solve_time_median_ms": float(np.median(solve) * 1e3) if solve.size else None,
         "solve_time_p99_ms": float(np.percentile(solve, 99) * 1e3) if solve.size else None,

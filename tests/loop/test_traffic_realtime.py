@@ -8,6 +8,7 @@ goes to the autopilot's address. Each run takes 20-40 s of wall time; every wait
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import signal
 import socket
@@ -21,13 +22,15 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.cli import main
+from companion.loop.config import load_scenario
+from companion.offline.replay import replay
 from tests.support.traffic_scenarios import antipodal_variant
 
 SHORT_HOP = Path(__file__).resolve().parents[1] / "data" / "short_hop.toml"
 
 
-def _realtime_demo(path: Path, capsys) -> dict:
-    assert main(["demo", str(path), "--realtime", "--json"]) == 0
+def _realtime_demo(path: Path, capsys, out: Path | None = None) -> dict:
+    assert main(["demo", str(path), "--realtime", "--json", *(["--out", str(out)] if out else [])]) == 0
     return json.loads(capsys.readouterr().out)
 
 
@@ -40,8 +43,19 @@ def _check_flight(summary: dict, n_sources: int) -> None:
     assert intake["clock_restarts"] == {}, intake
 
 
-def test_that_odometry_on_an_obstacle_link_from_offset_drifting_clocks_is_flown_safely_in_real_time(tmp_path, capsys):
-    _check_flight(_realtime_demo(antipodal_variant("odometry_clocks", tmp_path), capsys), 3)
+def test_that_odometry_on_an_obstacle_link_from_offset_drifting_clocks_is_flown_safely_in_real_time_and_replays_exactly(
+        tmp_path, capsys):
+    scenario = antipodal_variant("odometry_clocks", tmp_path)
+    summary = _realtime_demo(scenario, capsys, out=tmp_path / "out")
+    _check_flight(summary, 3)
+    # The tlog marks each tick and the link of each obstacle message (companion.loop.tlog_marks):
+    # the replay feeds every message on its own link at its own tick and reproduces every command.
+    offboard = dataclasses.replace(load_scenario(scenario).offboard, hold_after_goal_s=1.0)  # demo --realtime: fly --exit-after-goal 1
+    res = replay(tmp_path / "out" / "companion.tlog", scenario, offboard=offboard)
+    assert any("marked" in note for note in res.notes), res.notes
+    assert res.commands_compared == res.commands_recorded > 100
+    assert res.unmatched_commands == 0 and res.tick_mismatches == 0
+    assert res.max_abs_diff_mps == 0.0
 
 
 @pytest.mark.realtime

@@ -226,6 +226,23 @@ def test_that_takeoff_waits_for_auto_loiter_before_prestreaming():
     assert s.run(0.5, vehicle).phase is Phase.PRESTREAM
 
 
+def test_that_after_the_takeoff_the_vehicle_is_left_in_hold_to_settle_before_streaming():
+    def vehicle(s, msg):
+        if msg.command == 22:
+            s.seq.on_ack(s.t, ack(22, 0))
+            s.mode = px4.AUTO_TAKEOFF
+
+    s = Script(OffboardConfig(takeoff_alt_m=5.0, takeoff_settle_s=3.0), armed=True)
+    s.seq.on_home_altitude(488.0)
+    s.run(2.0, vehicle)
+    s.mode = px4.AUTO_LOITER
+    state = s.run(2.9, vehicle)   # Hold seen at once (t = 2 s), then 3 s of settling
+    assert state.phase is Phase.TAKEOFF and not state.streaming
+    state = s.run(0.2, vehicle)
+    assert state.phase is Phase.PRESTREAM and state.streaming
+    assert "settled 3.0 s" in state.reason
+
+
 def test_that_takeoff_waits_for_home_position_and_requests_it_until_it_comes():
     s = Script(OffboardConfig(takeoff_alt_m=5.0, retry_period_s=1.0), armed=True)
     s.run(3.0)

@@ -2,7 +2,7 @@
 
 Usage (one run, or five for the note)::
 
-    python -m tests.px4.flight [--scenario configs/antipodal.toml] [--runs 5] [--work /tmp/px4-flight]
+    python -m tests.px4.flight [--scenario configs/antipodal_px4.toml] [--runs 5] [--work /tmp/px4-flight]
 
 Each run starts PX4 SIH in a fresh directory, runs :class:`tests.px4.world.World`
 (obstacles to the companion, ground truth), runs ``companion fly --arm --takeoff-alt 5
@@ -26,7 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.px4.sitl import REPO, Sitl
+import os
+
+from tests.px4.sitl import REPO, REALTIME_NICE, Sitl, raise_priority
 from tests.px4.world import World, paths_from_scenario
 
 logger = logging.getLogger(__name__)
@@ -34,6 +36,7 @@ logger = logging.getLogger(__name__)
 TAKEOFF_ALT_M = 5.0
 COMPANION_TIMEOUT_S = 150.0
 HOLD_WATCH_S = 4.0
+TAKEOFF_WINDOW_S = 0.5   # the takeoff height is the mean true height over this long before OFFBOARD
 OBSTACLE_PORT = 14601  # the companion's receive-only obstacle link (`fly --obstacles`)
 AUTO, LOITER = 4, 3
 
@@ -50,8 +53,25 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
         scen = tomllib.load(f)
     goal = np.asarray(scen["mission"]["goal_ned_m"], float)
     radius = float(scen["vehicle"]["radius_m"])
+    result_c_min = float(scen["planner"]["c_min"])
     paths = paths_from_scenario(str(scenario))
-    result: dict = {"work": str(work)}
+    result: dict = {"work": str(work), "c_min": result_c_min}
+    nice_before = os.getpriority(os.PRIO_PROCESS, 0)
+    raise_priority()   # the world thread too: its truth and obstacle stamps are wall-clock
+    result["nice"] = os.getpriority(os.PRIO_PROCESS, 0)
+    try:
+        _fly(work, scenario, seed, extra, tlog, goal, radius, paths, result)
+    finally:
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, nice_before)
+        except OSError:
+            pass
+    return result
+
+
+def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Path, goal: np.ndarray, radius: float,
+         paths: list, result: dict) -> None:
+    """The flight, its checks and the replay of :func:`fly_once`, filling ``result``."""
     with Sitl(work / "sih") as sitl:
         world = World(paths, seed=seed, companion_port=OBSTACLE_PORT)
         world.start()
@@ -62,7 +82,7 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
                                "--obstacles", f"udpin:127.0.0.1:{OBSTACLE_PORT}",
                                "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--tlog", str(tlog),
                                "--duration", str(COMPANION_TIMEOUT_S - 20), "--json", *extra),
-                    capture_output=True, text=True, timeout=COMPANION_TIMEOUT_S, cwd=REPO)
+                    capture_output=True, text=True, timeout=COMPANION_TIMEOUT_S, cwd=REPO, preexec_fn=raise_priority)
             except subprocess.TimeoutExpired as exc:
                 proc = subprocess.CompletedProcess(exc.cmd, -9, exc.stdout or "", exc.stderr or "")
                 proc.stdout, proc.stderr = "", str(exc.stderr or "") + f"\ncompanion killed after {COMPANION_TIMEOUT_S} s"
@@ -76,18 +96,29 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
     report = json.loads(proc.stdout) if proc.returncode in (0, 1) and proc.stdout.strip() else {}
     result["companion_report"] = {k: report.get(k) for k in ("phase", "goal_reached_companion_t_s", "replans",
                                                              "min_realised_contour", "replans_with_slack",
-                                                             "failed_plans", "plan_status", "failsafe_events")}
+                                                             "failed_plans", "plan_status", "failsafe_events",
+                                                             "planner_process", "inbound_superseded", "setpoint_gap_max_ms")}
     obs = world.obs
     result["world_errors"] = world.errors
     truth_t = np.array([t for t, _ in obs.truth])
     truth_p = np.array([p for _, p in obs.truth])
+    np.savez(work / "traces.npz", truth_t=truth_t, truth_p=truth_p.reshape(-1, 3),
+             est_t=np.array([t for t, _ in obs.estimate]), est_p=np.array([p for _, p in obs.estimate]).reshape(-1, 3),
+             modes=np.array(obs.modes, float).reshape(-1, 4), offboard_t=np.nan if obs.offboard_t is None else obs.offboard_t,
+             exit_t=t_exit)
     if obs.offboard_t is None or truth_t.size == 0:
         result["ok"] = False
         result["why"] = "never in OFFBOARD" if truth_t.size else "no ground truth received"
-        return result
-    # takeoff: true height when OFFBOARD was engaged (after AUTO.TAKEOFF -> AUTO.LOITER)
-    i_off = int(np.searchsorted(truth_t, obs.offboard_t))
-    result["takeoff_height_m"] = float(-truth_p[min(i_off, truth_t.size - 1), 2])
+        return
+    # takeoff: the height the vehicle holds after the takeoff, as SIH's truth has it: the mean
+    # true height over the last TAKEOFF_WINDOW_S before OFFBOARD (the companion leaves PX4 in
+    # Hold for [offboard] takeoff_settle_s after AUTO.TAKEOFF ends), and PX4's own estimate then
+    window = (truth_t >= obs.offboard_t - TAKEOFF_WINDOW_S) & (truth_t <= obs.offboard_t)
+    result["takeoff_height_m"] = round(float(-truth_p[window, 2].mean()), 3) if window.any() else None
+    est_t = np.array([t for t, _ in obs.estimate])
+    est_p = np.array([p for _, p in obs.estimate]).reshape(-1, 3)
+    est_window = (est_t >= obs.offboard_t - TAKEOFF_WINDOW_S) & (est_t <= obs.offboard_t)
+    result["takeoff_height_px4_estimate_m"] = round(float(-est_p[est_window, 2].mean()), 3) if est_window.any() else None
     # collisions in truth: obstacles' true positions at the truth sample times
     moving = truth_t - obs.offboard_t
     clear = []
@@ -128,16 +159,12 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
     else:
         result["replay"] = {"error": rep.stderr.strip()[-500:]}
     result["ok"] = judge(result) == []
-    return result
+
 
 
 def judge_safety(r: dict) -> list[str]:
-    """The failed safety and hand-back checks of a run (empty when they held).
-
-    These held in every run measured so far (no collision in truth, Hold without a
-    failsafe after the companion stops); the CI test asserts them. :func:`judge` adds
-    the targets not yet met reliably.
-    """
+    """The failed safety and hand-back checks of a run (empty when they held): no collision
+    in SIH's truth, and Hold without a failsafe after the companion stops."""
     bad = []
     if r.get("min_true_clearance_m") is None or r["min_true_clearance_m"] <= 0.0:
         bad.append(f"collision in truth: clearance {r.get('min_true_clearance_m')} m")
@@ -147,19 +174,17 @@ def judge_safety(r: dict) -> list[str]:
 
 
 def judge(r: dict) -> list[str]:
-    """All failed checks of a run, the issue's targets included (empty when it passed).
+    """All failed checks of a run, issue 13's targets (empty when it passed; ``make px4-test`` asserts it).
 
-    Beyond :func:`judge_safety`: takeoff to the requested altitude within 0.3 m, the
-    realised contour of touch never below ``c_min``, the goal within 25 s of OFFBOARD, and
-    the replay reproducing every command exactly (it did in every run while obstacles
-    shared the autopilot's link; with their own link it differed by 5e-4 m/s once).
-    Five runs on a loaded 2-core machine met these 1 time in 5 (see docs/PX4.md).
+    Beyond :func:`judge_safety`: takeoff to the requested altitude within 0.3 m (SIH's
+    true height), the realised contour of touch never below the scenario's ``c_min``,
+    the goal within 25 s of OFFBOARD, and the replay reproducing every command exactly.
     """
     bad = []
     if r.get("takeoff_height_m") is None or abs(r["takeoff_height_m"] - TAKEOFF_ALT_M) > 0.3:
         bad.append(f"takeoff height {r.get('takeoff_height_m')} m, asked {TAKEOFF_ALT_M} m")
     rc = r.get("companion_report", {})
-    if rc.get("min_realised_contour") is not None and rc["min_realised_contour"] < 0.90 - 1e-9:
+    if rc.get("min_realised_contour") is None or rc["min_realised_contour"] < r.get("c_min", 0.90) - 1e-9:
         bad.append(f"realised contour {rc['min_realised_contour']} below c_min")
     if r.get("time_to_goal_s") is None or r["time_to_goal_s"] > 25.0:
         bad.append(f"time to goal {r.get('time_to_goal_s')} s after OFFBOARD")
@@ -172,7 +197,7 @@ def judge(r: dict) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenario", default=str(REPO / "configs" / "antipodal.toml"))
+    ap.add_argument("--scenario", default=str(REPO / "configs" / "antipodal_px4.toml"))
     ap.add_argument("--runs", type=int, default=1)
     ap.add_argument("--work", default="/tmp/px4-flight")
     ap.add_argument("extra", nargs="*", help="extra companion arguments (after --)")

@@ -81,6 +81,7 @@ class Observations:
     modes: list[tuple[float, int, int, bool]] = field(default_factory=list)       # (t, main, sub, armed)
     texts: list[tuple[float, str]] = field(default_factory=list)
     obstacles: list[tuple[float, np.ndarray]] = field(default_factory=list)       # (t, (P, 3) true positions)
+    estimate: list[tuple[float, np.ndarray]] = field(default_factory=list)       # (t, PX4's LOCAL_POSITION_NED)
     offboard_t: float | None = None
 
 
@@ -169,6 +170,8 @@ class World(threading.Thread):
             self.obs.texts.append((now, msg.text))
         elif kind in ("LOCAL_POSITION_NED", "ATTITUDE"):
             self._px4_boot = (now, int(msg.time_boot_ms))
+            if kind == "LOCAL_POSITION_NED":
+                self.obs.estimate.append((now, np.array([msg.x, msg.y, msg.z])))
 
     def _on_truth(self, now: float, msg) -> None:
         lat, lon, alt = msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3
