@@ -88,7 +88,7 @@ class Simulator:
         self._rng = np.random.Generator(np.random.PCG64(seeds[0]))
         self._position_error = GaussMarkovError(noise_factor(cfg.position_noise_cov_m2), cfg.position_noise_correlation_s)
         self._Lv = noise_factor(cfg.velocity_noise_cov_m2ps2)
-        self.vparams = VehicleParams(cfg.velocity_time_constant_s, cfg.accel_max_mps2)
+        self.vparams = VehicleParams(cfg.velocity_time_constant_s, cfg.accel_max_mps2, profile=cfg.vehicle)
         self.vehicle = initial_state(scenario.start_ned_m, cfg.start_yaw_rad)
         self.params = ParamStore(cfg.params)
         self.commander = Commander(self.params, cfg.start_mode, cfg.start_armed, self.vehicle,

@@ -13,10 +13,14 @@ truth). Sections owned by the companion (``[planner]``, ``[estimator]``, the res
 
 ``[sim]`` keys (all optional)
 -----------------------------
+vehicle : str, default ``"lag"``
+    The vehicle's velocity response: ``"lag"``, a first-order lag (the two keys below);
+    ``"px4"``, PX4's PID velocity loop against SIH's linear drag with an attitude lag
+    (:mod:`mavsim.px4_response`), which responds like PX4 SITL (docs/VEHICLE_PROFILES.md).
 velocity_time_constant_s : float, default 0.3
-    Time constant of the first-order velocity response (s).
+    Time constant of the first-order velocity response (s); ``vehicle = "lag"`` only.
 accel_max_mps2 : float, default 4.0
-    Bound on the norm of the vehicle acceleration (m/s^2).
+    Bound on the norm of the vehicle acceleration (m/s^2); ``vehicle = "lag"`` only.
 physics_step_s : float, default 0.01
     Fixed physics step (s); ``advance`` may end on a shorter partial step.
 position_noise_cov_m2 : 3x3, default 0.001 I
@@ -104,6 +108,7 @@ import numpy as np
 
 from mavsim.errors import ScenarioError
 from mavsim.params import DEFAULT_PARAMS, check_param_value
+from mavsim.vehicle import VEHICLE_PROFILES
 
 logger = logging.getLogger(__name__)
 
@@ -126,6 +131,7 @@ MODE_NAMES = ("POSCTL", "AUTO.LOITER", "AUTO.TAKEOFF", "AUTO.LAND", "AUTO.RTL", 
 class SimConfig:
     """Vehicle physics, sensor noise and PX4 behaviour settings (``[sim]``)."""
 
+    vehicle: str = "lag"
     velocity_time_constant_s: float = 0.3
     accel_max_mps2: float = 4.0
     physics_step_s: float = 0.01
@@ -214,7 +220,7 @@ MAX_WAYPOINTS = 10_000
 MAX_MAP_ITEMS = 256
 
 SIM_KEYS = {
-    "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2", "position_noise_correlation_s",
+    "vehicle", "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2", "position_noise_correlation_s",
     "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
     "home_lat_deg", "home_lon_deg", "home_alt_m", "geoid_separation_m", "arming_delay_s", "offboard_reject_ack",
     "params", "stream_rates_hz",
@@ -351,7 +357,15 @@ def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
             raise s.err(f"stream_rates_hz.{name}", f"unknown stream (known: {', '.join(DEFAULT_RATES_HZ)})")
         if not 0.0 <= rate <= 1000.0:
             raise s.err(f"stream_rates_hz.{name}", f"must be in [0, 1000] Hz, got {rate}")
+    vehicle = s.string("vehicle", "lag")
+    if vehicle not in VEHICLE_PROFILES:
+        raise s.err("vehicle", f"must be one of {', '.join(VEHICLE_PROFILES)}, got {vehicle!r}")
+    if vehicle != "lag":
+        for key in ("velocity_time_constant_s", "accel_max_mps2"):
+            if s.has(key):
+                raise s.err(key, f"applies to vehicle = \"lag\" only, not {vehicle!r}")
     return SimConfig(
+        vehicle=vehicle,
         velocity_time_constant_s=s.number("velocity_time_constant_s", 0.3, positive=True),
         accel_max_mps2=s.number("accel_max_mps2", 4.0, positive=True),
         physics_step_s=s.number("physics_step_s", 0.01, lo=1e-4, hi=0.1),

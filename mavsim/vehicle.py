@@ -1,6 +1,10 @@
 """Kinematic multicopter in local NED: pure functions, no clock.
 
-Model (per step ``dt``)::
+Two velocity responses, chosen per scenario by ``[sim] vehicle``: ``"lag"`` (below) and
+``"px4"``, PX4's PID velocity loop against SIH's linear drag with an attitude lag
+(:mod:`mavsim.px4_response`), which responds like PX4 SITL does.
+
+The lag model (per step ``dt``)::
 
     v_cmd  <- commanded velocity (NED, m/s)
     dv     = (v_cmd - v) (1 - exp(-dt / tau))      # exact first-order response
@@ -23,11 +27,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mavsim.px4_response import ControllerState, Px4Response, controller_step
+
 logger = logging.getLogger(__name__)
 
-__all__ = ["VehicleParams", "VehicleState", "VehicleCommand", "step", "initial_state", "GRAVITY_MPS2"]
+__all__ = ["VEHICLE_PROFILES", "VehicleParams", "VehicleState", "VehicleCommand", "step", "initial_state", "GRAVITY_MPS2"]
 
 GRAVITY_MPS2 = 9.80665
+#: Names of the velocity responses (``[sim] vehicle``).
+VEHICLE_PROFILES = ("lag", "px4")
 YAW_RATE_MAX_RADPS = 1.5  # heading change rate toward a yaw setpoint (PX4 MPC_YAWRAUTO_MAX ~ 45 deg/s)
 
 
@@ -41,10 +49,16 @@ class VehicleParams:
         First-order velocity time constant tau (s).
     accel_max_mps2 : float
         Bound on the acceleration norm while the motors are on (m/s^2).
+    profile : str
+        ``"lag"`` (the two values above) or ``"px4"`` (``px4``; the two values above unused).
+    px4 : Px4Response
+        The PX4 profile's gains, limits, lags and drag.
     """
 
     time_constant_s: float = 0.3
     accel_max_mps2: float = 4.0
+    profile: str = "lag"
+    px4: Px4Response = Px4Response()
 
 
 @dataclass(frozen=True)
@@ -59,6 +73,8 @@ class VehicleState:
         Heading (0 north, positive toward east) and its rate.
     on_ground : bool
         True while resting on the ground (z = 0).
+    controller : ControllerState
+        The PX4 profile's velocity-loop state (zero for the lag and on the ground).
     """
 
     position_ned_m: np.ndarray
@@ -67,6 +83,7 @@ class VehicleState:
     yaw_rad: float
     yaw_rate_radps: float
     on_ground: bool
+    controller: ControllerState = ControllerState(np.zeros(3), np.zeros(3))
 
     @property
     def roll_pitch_rad(self) -> tuple[float, float]:
@@ -140,7 +157,11 @@ def step(state: VehicleState, command: VehicleCommand, dt: float, params: Vehicl
             rate = 0.0
         z3 = np.zeros(3)
         return VehicleState(p, z3, z3, yaw, rate, True)
-    if command.motors_on:
+    controller = ControllerState.zero()
+    if command.motors_on and params.profile == "px4":
+        controller, v_new = controller_step(state.controller, v, state.accel_ned_mps2, v_cmd, dt, params.px4)
+        dv = v_new - v
+    elif command.motors_on:
         dv = (v_cmd - v) * (1.0 - math.exp(-dt / params.time_constant_s))  # first-order lag
         lim = params.accel_max_mps2 * dt
         n = math.sqrt(float(dv @ dv))
@@ -156,7 +177,9 @@ def step(state: VehicleState, command: VehicleCommand, dt: float, params: Vehicl
         v_new = np.zeros(3)
         on_ground = True
     yaw, rate = _yaw_step(state.yaw_rad, command, dt) if command.motors_on else (state.yaw_rad, 0.0)
-    return VehicleState(p_new, v_new, dv / dt, yaw, rate, on_ground)
+    if on_ground:
+        controller = ControllerState.zero()
+    return VehicleState(p_new, v_new, dv / dt, yaw, rate, on_ground, controller)
 
 
 def _yaw_step(yaw: float, command: VehicleCommand, dt: float) -> tuple[float, float]:

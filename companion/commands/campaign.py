@@ -32,6 +32,7 @@ from companion.offline.campaign import (
     EKF_CORRELATION_S,
     FAMILIES,
     METHODS,
+    VEHICLES,
     format_table,
     generate_scenario,
     run_campaign,
@@ -77,6 +78,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="correlation time of the simulated drone position error and of every obstacle's measurement "
                         "error (Gauss-Markov, as an EKF's or a GNSS receiver's error wanders; same covariances, reported "
                         f"honestly); 0: white; {EKF_CORRELATION_S:g} s is the honest model of docs/CAMPAIGNS.md")
+    p.add_argument("--vehicle", choices=VEHICLES, default="lag",
+                   help="mavsim's vehicle profile: lag (0.3 s lag, the planner's own model) or px4 (PX4's velocity "
+                        "loop against drag; the planner uses the response identified for it)")
     p.add_argument("--results", metavar="FILE", default=None,
                    help="results file (JSON lines, one finished run per line, appended as runs finish; "
                         "default: beside --json with the suffix .jsonl, else campaign-FAMILY-seedS.jsonl; "
@@ -115,13 +119,15 @@ def run(args: argparse.Namespace) -> int:
     if args.save_scenario:
         path = write_scenario(generate_scenario(args.family, args.seed, args.episode, c_min=args.c_min,
                                                 duration_s=args.duration,
-                                                noise_correlation_s=args.noise_correlation),
+                                                noise_correlation_s=args.noise_correlation,
+                                                vehicle=args.vehicle),
                               args.save_scenario)
         print(f"wrote {path}")
     store = results_path(args)
     result = run_campaign(args.family, episodes, args.methods, args.seed, workers=args.workers, c_min=args.c_min,
                           duration_s=args.duration, progress=args.progress, results_path=store, resume=args.resume,
-                          scheduler=args.scheduler, noise_correlation_s=args.noise_correlation)
+                          scheduler=args.scheduler, noise_correlation_s=args.noise_correlation,
+                          vehicle=args.vehicle)
     print(format_table(result))
     if store is not None:
         print(f"results: {store}")

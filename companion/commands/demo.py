@@ -17,7 +17,7 @@ from companion.errors import ConfigError
 from companion.offline.crowd import MAX_SYSTEMS
 from companion.offline.report import format_report, truth_report
 
-SCENARIOS = ("antipodal", "corridor", "single_obstacle")
+SCENARIOS = ("antipodal", "corridor", "single_obstacle", "antipodal_px4sim")
 
 
 def resolve_scenario(name: str) -> Path:

@@ -43,7 +43,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="receive-only obstacle link (pymavlink connection string, e.g. udpin:0.0.0.0:14601); repeatable; "
         "added to the scenario's [traffic] obstacle_links",
     )
-    p.add_argument("--scenario", required=True, help="scenario TOML (mission, planner, estimator, map)")
+    p.add_argument("--scenario", help="scenario TOML (mission, planner, estimator, map); required unless --identify")
+    p.add_argument("--identify", action="store_true",
+                   help="instead of a mission, fly the identification velocity steps (about 75 s, 45 m north) in "
+                        "OFFBOARD, switch to Hold and record --tlog for `companion identify`")
     p.add_argument("--arm", action="store_true", help="arm the vehicle if it is disarmed")
     p.add_argument("--takeoff-alt", type=positive_number, default=None, metavar="M", help="take off to M metres above home first")
     p.add_argument("--reengage", action="store_true", help="re-request OFFBOARD after the pilot took over (default: never)")
@@ -69,6 +72,12 @@ def microsecond_clock() -> float:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.identify:
+        from companion.commands.fly_identify import run as fly_identification
+
+        return fly_identification(args)
+    if not args.scenario:
+        raise ConfigError("--scenario FILE is required (unless --identify)")
     overrides: dict = {"formulation": args.formulation} if args.formulation else {}
     if args.no_c_max:
         overrides["c_max"] = None

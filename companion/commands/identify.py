@@ -27,8 +27,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Read the velocity setpoints (SET_POSITION_TARGET_LOCAL_NED, velocity or position + velocity) and "
             "the vehicle's LOCAL_POSITION_NED (or ODOMETRY) of a tlog, keep the stretches in OFFBOARD, and fit "
-            "the planner's vehicle response per axis. Fly `python -m tests.px4.record_steps` (or any OFFBOARD "
-            "flight with velocity steps) to get such a log."
+            "the planner's vehicle response per axis. Fly `companion fly --identify --tlog steps.tlog` (or any "
+            "OFFBOARD flight with velocity steps) to get such a log."
         ),
     )
     p.add_argument("log", metavar="LOG.tlog")

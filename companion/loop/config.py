@@ -43,7 +43,7 @@ _COMPANION_SECTIONS = {"scenario", "vehicle", "mission", "planner", "estimator",
 #: mavsim validates their values; tests/loop/test_config.py holds this equal to mavsim's schema.
 SIMULATOR_KEYS: dict[str, frozenset[str]] = {
     "sim": frozenset({
-        "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2",
+        "vehicle", "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2",
         "position_noise_correlation_s", "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
         "home_lat_deg", "home_lon_deg", "home_alt_m", "geoid_separation_m", "arming_delay_s", "offboard_reject_ack",
         "params", "stream_rates_hz",

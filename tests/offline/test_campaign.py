@@ -6,6 +6,7 @@ import json
 import math
 import os
 import tomllib
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -22,6 +23,7 @@ from companion.offline.campaign import (
     SPEED_MAX_MPS,
     EpisodeTask,
     ResultsFile,
+    campaign_header,
     clopper_pearson,
     collision_bound,
     episode_sim_seed,
@@ -40,6 +42,8 @@ from companion.loop.config import load_scenario as companion_load
 from mavsim.lockstep import LockstepSimulator
 from mavsim.scenario import load_scenario as mavsim_load
 from mavsim.scenario import scenario_from_dict as mavsim_load_dict
+
+ROOT = Path(__file__).resolve().parents[2]
 
 SHORT_S = 12.0  # simulated seconds per run in the default suite: takeoff and the first encounter
 
@@ -115,6 +119,25 @@ def test_that_correlated_drone_and_obstacle_errors_are_opt_in_and_leave_the_rest
     assert all(ob.measurement_correlation_s == 2.0 for ob in honest.obstacles)
     with pytest.raises(SystemExit):
         main(["campaign", "--noise-correlation", "-1"])
+
+
+def test_that_the_px4_profile_flies_the_same_encounter_with_the_identified_planner_model():
+    lag = generate_scenario("antipodal", 5, 3)
+    px4 = generate_scenario("antipodal", 5, 3, vehicle="px4")
+    assert px4["sim"].pop("vehicle") == "px4" and "velocity_time_constant_s" not in px4["planner"]
+    response = px4["planner"].pop("vehicle_response")
+    shipped = tomllib.loads((ROOT / "configs" / "antipodal_px4sim.toml").read_text())["planner"]["vehicle_response"]
+    assert response == shipped and set(response) == {"horizontal", "vertical"}
+    for key in ("velocity_time_constant_s", "accel_max_mps2"):
+        del lag["sim"][key]
+    del lag["planner"]["velocity_time_constant_s"]
+    assert px4 == lag                                   # the encounter is the same one
+    data = generate_scenario("antipodal", 5, 3, vehicle="px4")
+    assert mavsim_load_dict(data).sim.vehicle == "px4"
+    assert campaign_header("antipodal", 1, 0.9, 40.0, vehicle="px4")["vehicle"] == "px4"
+    assert "vehicle" not in campaign_header("antipodal", 1, 0.9, 40.0)   # files from before still resume
+    with pytest.raises(InputError, match="unknown vehicle profile 'sih'"):
+        generate_scenario("antipodal", 5, 3, vehicle="sih")
 
 
 def test_that_unknown_family_and_method_are_rejected():

@@ -28,6 +28,7 @@ from companion.offline.campaign.generate import (
     RADIUS_RANGE_M,
     SPAWN_CLEARANCE_M,
     SPEED_MAX_MPS,
+    VEHICLES,
     episode_rng,
     episode_sim_seed,
     generate_scenario,
@@ -43,7 +44,7 @@ from companion.offline.campaign.toml_writer import to_toml, write_scenario
 
 __all__ = [
     "ACTIVE_CONTOUR", "DEFAULT_DURATION_S", "EKF_CORRELATION_S", "FAMILIES", "METHODS", "NEES_95", "RADIUS_RANGE_M", "SPAWN_CLEARANCE_M",
-    "SPEED_MAX_MPS", "CampaignResult", "EpisodeResult", "EpisodeScore", "EpisodeTask", "MethodSummary", "ResultsFile",
+    "SPEED_MAX_MPS", "VEHICLES", "CampaignResult", "EpisodeResult", "EpisodeScore", "EpisodeTask", "MethodSummary", "ResultsFile",
     "campaign_header", "clopper_pearson", "collision_bound", "episode_rng", "episode_sim_seed", "format_table",
     "generate_scenario", "open_executor", "random_covariance", "run_campaign", "run_episode", "score_run",
     "summarise", "to_toml", "write_scenario",

@@ -56,6 +56,12 @@ ANISOTROPIC_SHARE = 0.6
 SENSING_RANGE_M = 10.0
 #: Velocity lag of the simulated vehicle, which the planner models too, seconds.
 VELOCITY_TIME_CONSTANT_S = 0.3
+#: mavsim's vehicle profiles (``[sim] vehicle``) a campaign can fly.
+VEHICLES = ("lag", "px4")
+#: The shipped scenario whose ``[planner] vehicle_response`` the planner uses against the
+#: ``px4`` profile: identified from a mavsim log by ``companion identify`` (never copied
+#: from mavsim's settings), so the test world does not agree with the planner by construction.
+PX4_PROFILE_SCENARIO = "antipodal_px4sim.toml"
 DEFAULT_DURATION_S = 40.0
 #: The honest noise model's correlation time, seconds (``--noise-correlation``): PX4's EKF2
 #: position estimate follows GNSS at low frequency (the IMU only smooths it between fixes),
@@ -67,6 +73,16 @@ QUIET_STREAMS_HZ = {"ATTITUDE": 5.0, "GLOBAL_POSITION_INT": 5.0, "LOCAL_POSITION
 #: Time (s) the drone needs to take over before it moves (prestream + OFFBOARD), and its
 #: typical cruise speed (m/s) toward a far waypoint; used only to time encounters.
 ENGAGE_S, CRUISE_MPS = 3.2, 1.75
+
+
+def px4_profile_response() -> dict[str, dict[str, float]]:
+    """The planner's ``vehicle_response`` table for mavsim's ``px4`` profile (from :data:`PX4_PROFILE_SCENARIO`)."""
+    import tomllib
+    from importlib import resources
+
+    text = resources.files("companion.scenarios").joinpath(PX4_PROFILE_SCENARIO).read_text(encoding="utf-8")
+    table = tomllib.loads(text)["planner"]["vehicle_response"]
+    return {name: dict(axis) for name, axis in table.items()}
 
 
 def episode_rng(seed: int, index: int) -> np.random.Generator:
@@ -114,7 +130,8 @@ def _place(rng: np.random.Generator, draw: Callable[[], tuple[np.ndarray, np.nda
 
 
 def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90,
-                      duration_s: float = DEFAULT_DURATION_S, noise_correlation_s: float = 0.0) -> dict:
+                      duration_s: float = DEFAULT_DURATION_S, noise_correlation_s: float = 0.0,
+                      vehicle: str = "lag") -> dict:
     """Draw episode ``index`` of a ``family`` campaign with ``seed`` as a scenario dict (TOML tables).
 
     The same ``(family, seed, index)`` always gives the same dict. The planner's
@@ -123,9 +140,14 @@ def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90
     measurement error Gauss-Markov processes with that correlation time (``mavsim.noise``;
     same covariances, reported as before: the honest noise model, see
     :data:`EKF_CORRELATION_S`); 0 keeps them white and the dict as it always was.
+    ``vehicle`` is mavsim's profile: ``"lag"`` (the 0.3 s lag the planner models too) or
+    ``"px4"`` (PX4's velocity loop; the planner gets the response identified for it, from
+    :data:`PX4_PROFILE_SCENARIO`). The encounter drawn is the same for both.
     """
     if family not in FAMILIES:
         raise InputError(f"unknown campaign family {family!r} (known: {', '.join(FAMILIES)})")
+    if vehicle not in VEHICLES:
+        raise InputError(f"unknown vehicle profile {vehicle!r} (known: {', '.join(VEHICLES)})")
     rng = episode_rng(seed, index)
     start = np.array([0.0, 0.0, ALTITUDE_M])
     heading = rng.uniform(0.0, 2 * math.pi)
@@ -249,6 +271,11 @@ def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90
         data["sim"]["position_noise_correlation_s"] = float(noise_correlation_s)
         for ob in obstacles:
             ob["measurement_correlation_s"] = float(noise_correlation_s)
+    if vehicle == "px4":
+        del data["planner"]["velocity_time_constant_s"], data["sim"]["velocity_time_constant_s"]
+        del data["sim"]["accel_max_mps2"]
+        data["sim"]["vehicle"] = "px4"
+        data["planner"]["vehicle_response"] = px4_profile_response()
     if walls:
         data["map"] = {"walls": walls}
     return data

@@ -46,6 +46,7 @@ class EpisodeTask:
     c_min: float = 0.90
     duration_s: float = DEFAULT_DURATION_S
     noise_correlation_s: float = 0.0
+    vehicle: str = "lag"
 
 
 def run_episode(task: EpisodeTask, *, keep_records: bool = False) -> EpisodeResult:
@@ -59,7 +60,7 @@ def run_episode(task: EpisodeTask, *, keep_records: bool = False) -> EpisodeResu
     t0 = time.perf_counter()
     try:
         data = generate_scenario(task.family, task.seed, task.index, c_min=task.c_min, duration_s=task.duration_s,
-                                 noise_correlation_s=task.noise_correlation_s)
+                                 noise_correlation_s=task.noise_correlation_s, vehicle=task.vehicle)
         run = run_lockstep(data, seed=key["sim_seed"], stop_after_goal_s=STOP_AFTER_GOAL_S, formulation=task.method)
         return EpisodeResult(**key, score=score_run(run, data), wall_time_s=time.perf_counter() - t0,
                              run=run if keep_records else None)
@@ -109,7 +110,8 @@ def open_executor(workers: int, scheduler: str | None = None) -> Iterator[tuple[
 def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], seed: int, *,
                  workers: int | None = None, c_min: float = 0.90, duration_s: float = DEFAULT_DURATION_S,
                  progress: bool | str | None = None, results_path: str | Path | None = None, resume: bool = False,
-                 scheduler: str | None = None, noise_correlation_s: float = 0.0) -> CampaignResult:
+                 scheduler: str | None = None, noise_correlation_s: float = 0.0,
+                 vehicle: str = "lag") -> CampaignResult:
     """Fly ``episodes`` (indices) of a ``family`` campaign with every method.
 
     Parameters
@@ -123,6 +125,7 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
         runs only the missing ones.
     scheduler : address of a Dask distributed scheduler to run the episodes on.
     noise_correlation_s : correlation time of mavsim's drone position error and obstacle measurement errors (s; 0: white).
+    vehicle : mavsim's vehicle profile, ``"lag"`` or ``"px4"`` (see :func:`generate_scenario`).
     """
     if family not in FAMILIES:
         raise InputError(f"unknown campaign family {family!r} (known: {', '.join(FAMILIES)})")
@@ -132,10 +135,10 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
     episodes, methods = tuple(episodes), tuple(methods)
     workers = workers or os.cpu_count() or 1
     keys = [(i, m) for i in episodes for m in methods]
-    store = (ResultsFile(results_path, campaign_header(family, seed, c_min, duration_s, noise_correlation_s), resume=resume)
+    store = (ResultsFile(results_path, campaign_header(family, seed, c_min, duration_s, noise_correlation_s, vehicle), resume=resume)
              if results_path is not None else None)
     in_memory: dict[tuple[int, str], EpisodeResult] = {}
-    todo = [EpisodeTask(family, seed, i, m, c_min, duration_s, noise_correlation_s) for i, m in keys if store is None or (i, m) not in store]
+    todo = [EpisodeTask(family, seed, i, m, c_min, duration_s, noise_correlation_s, vehicle) for i, m in keys if store is None or (i, m) not in store]
     mode = "auto" if progress is None or progress is True else ("off" if progress is False else progress)
     bar = Progress(f"campaign {family}", len(keys), len(keys) - len(todo), mode=mode)
     t0 = time.perf_counter()

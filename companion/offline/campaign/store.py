@@ -34,11 +34,15 @@ MAX_LINE_BYTES = 16 * 1024 * 1024
 
 
 def campaign_header(family: str, seed: int, c_min: float, duration_s: float,
-                    noise_correlation_s: float = 0.0) -> dict[str, Any]:
-    """The header line: what every row of the file depends on."""
-    return {"format": FORMAT, "version": VERSION, "family": family, "seed": int(seed),
-            "c_min": float(c_min), "duration_s": float(duration_s),
-            "noise_correlation_s": float(noise_correlation_s)}
+                    noise_correlation_s: float = 0.0, vehicle: str = "lag") -> dict[str, Any]:
+    """The header line: what every row of the file depends on (``vehicle`` only when it is
+    not the default lag profile)."""
+    header = {"format": FORMAT, "version": VERSION, "family": family, "seed": int(seed),
+              "c_min": float(c_min), "duration_s": float(duration_s),
+              "noise_correlation_s": float(noise_correlation_s)}
+    if vehicle != "lag":
+        header["vehicle"] = vehicle
+    return header
 
 
 def read_results_file(path: str | Path) -> tuple[dict[str, Any], list[EpisodeResult], int]:

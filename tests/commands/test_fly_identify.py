@@ -1,0 +1,69 @@
+"""``companion fly --identify``: the identification flight, one command on a new vehicle."""
+
+from __future__ import annotations
+
+import socket
+import threading
+
+import pytest
+
+from companion.cli import main as companion_main
+from companion.offline.identify import identify, load_response_log
+from mavsim.core import Simulator
+from mavsim.scenario import scenario_from_dict
+from mavsim.udp import LinkAddress, UdpServer
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _run(capsys, argv: list[str]) -> tuple[int, str, str]:
+    try:
+        code = companion_main(argv)
+    except SystemExit as exc:
+        code = exc.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["fly", "--identify"], "--identify needs --tlog"),
+    (["fly"], "--scenario FILE is required"),
+])
+def test_that_a_missing_argument_is_one_line(capsys, argv, needle):
+    code, _, err = _run(capsys, argv)
+    assert code == 2 and err.count("\n") == 1 and needle in err and "Traceback" not in err
+
+
+def test_that_no_autopilot_is_one_line_after_the_bounded_wait(capsys, tmp_path, monkeypatch):
+    monkeypatch.setattr("companion.commands.fly_identify.HEARTBEAT_WAIT_S", 0.5)
+    port = _free_port()
+    code, _, err = _run(capsys, ["fly", "--identify", "--connect", f"udpin:127.0.0.1:{port}",
+                                 "--tlog", str(tmp_path / "s.tlog")])
+    assert code == 2 and "no autopilot HEARTBEAT" in err and err.count("\n") == 1
+
+
+@pytest.mark.realtime
+def test_that_the_identification_flight_against_the_px4_profile_identifies_its_two_part_response(capsys, tmp_path):
+    api = _free_port()
+    sim = Simulator(scenario_from_dict({"vehicle": {"start_ned_m": [0.0, 0.0, 0.0]}, "sim": {"vehicle": "px4"}}),
+                    seed=3, links=("api",))
+    server = UdpServer(sim, [LinkAddress("api", 0, api)], speed=1.0)
+    thread = threading.Thread(target=server.run, args=(200.0,), daemon=True)
+    thread.start()
+    tlog = tmp_path / "steps.tlog"
+    try:
+        code, out, _ = _run(capsys, ["fly", "--identify", "--connect", f"udpin:127.0.0.1:{api}", "--arm",
+                                     "--takeoff-alt", "5", "--tlog", str(tlog)])
+    finally:
+        server.stop()
+        thread.join(timeout=5)
+        server.close()
+    assert code == 0 and "final mode AUTO.LOITER" in out
+    result = identify(load_response_log(tlog))
+    lag, model = result.figures["lag 0.3 s"], result.figures["model"]
+    assert lag["one_step_rms_horizontal"] > 3 * model["one_step_rms_horizontal"]
+    assert 1.0 < result.horizontal.p_gain_per_s < 2.5 and result.horizontal.i_gain_per_s2 > 0.1
