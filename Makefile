@@ -5,7 +5,7 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 BSTAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench campaign reliability campaign-test realtime-test px4-test venv clean
+.PHONY: demo test bench campaign reliability campaign-test realtime-test crowd-test px4-test venv clean
 
 # PX4 SITL build with start-sih (see docs/PX4.md); `make px4-test` flies the companion against it.
 PX4_SITL_DIR ?= ../shared/px4-sitl
@@ -63,7 +63,11 @@ campaign-test: $(STAMP)
 
 # Closed loops in wall-clock time over loopback UDP (mavsim and the companion as two processes).
 realtime-test: $(STAMP)
-	$(VENV)/bin/pytest -q -m realtime
+	$(VENV)/bin/pytest -q -m 'realtime and not crowd'
+
+# The corridor with 200 extra obstacle systems in real time: issue 14's open must-show (fails today).
+crowd-test: $(STAMP)
+	$(VENV)/bin/pytest -q -m crowd
 
 px4-test: $(STAMP)
 	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -s -m px4 tests/px4
