@@ -173,26 +173,33 @@ def judge_safety(r: dict) -> list[str]:
     return bad
 
 
-def judge(r: dict) -> list[str]:
-    """All failed checks of a run, issue 13's targets (empty when it passed; ``make px4-test`` asserts it).
+def judge_replay(r: dict) -> list[str]:
+    """The failed replay check of a run: ``companion replay`` must reproduce every command exactly."""
+    rp = r.get("replay", {})
+    if rp.get("max_abs_diff_mps") != 0.0 or rp.get("unmatched_commands") or \
+            rp.get("commands_compared") != rp.get("commands_recorded"):
+        return [f"replay {rp}"]
+    return []
 
-    Beyond :func:`judge_safety`: takeoff to the requested altitude within 0.3 m (SIH's
-    true height), the realised contour of touch never below the scenario's ``c_min``,
-    the goal within 25 s of OFFBOARD, and the replay reproducing every command exactly.
-    """
+
+def judge_targets(r: dict) -> list[str]:
+    """The missed performance targets of issue 13 (empty when all were met): takeoff to the
+    requested altitude within 0.3 m (SIH's true height), the realised contour of touch never
+    below the scenario's ``c_min``, and the goal within 25 s of OFFBOARD."""
     bad = []
     if r.get("takeoff_height_m") is None or abs(r["takeoff_height_m"] - TAKEOFF_ALT_M) > 0.3:
         bad.append(f"takeoff height {r.get('takeoff_height_m')} m, asked {TAKEOFF_ALT_M} m")
     rc = r.get("companion_report", {})
     if rc.get("min_realised_contour") is None or rc["min_realised_contour"] < r.get("c_min", 0.90) - 1e-9:
-        bad.append(f"realised contour {rc['min_realised_contour']} below c_min")
+        bad.append(f"realised contour {rc.get('min_realised_contour')} below c_min")
     if r.get("time_to_goal_s") is None or r["time_to_goal_s"] > 25.0:
         bad.append(f"time to goal {r.get('time_to_goal_s')} s after OFFBOARD")
-    rp = r.get("replay", {})
-    if rp.get("max_abs_diff_mps") != 0.0 or rp.get("unmatched_commands") or \
-            rp.get("commands_compared") != rp.get("commands_recorded"):
-        bad.append(f"replay {rp}")
-    return judge_safety(r) + bad
+    return bad
+
+
+def judge(r: dict) -> list[str]:
+    """All failed checks of a run: safety and hand-back, replay, and the performance targets."""
+    return judge_safety(r) + judge_replay(r) + judge_targets(r)
 
 
 def main(argv: list[str] | None = None) -> int:
