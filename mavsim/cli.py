@@ -13,9 +13,11 @@ names the file, section and key; a bad argument; a port that cannot be bound).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import math
+import signal
 import sys
 import time
 from importlib import metadata
@@ -126,6 +128,25 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+@contextlib.contextmanager
+def _stop_on_signals(server: UdpServer):
+    """SIGINT and SIGTERM ask ``server`` to stop after its current step, instead of raising
+    KeyboardInterrupt wherever the simulator happens to be (which could leave it half-updated
+    and lose the summary). Yields the list of signal names received; restores the handlers."""
+    received: list[str] = []
+
+    def handler(signum, _frame) -> None:
+        received.append(signal.Signals(signum).name)
+        server.stop()
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield received
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``mavsim`` console script; returns the exit status."""
     args = build_parser().parse_args(argv)
@@ -168,11 +189,10 @@ def main(argv: list[str] | None = None) -> int:
               + (f", obstacles {args.bind}:{ports[OBSTACLE_LINK]} -> {args.target_host}:{args.obstacle_port}"
                  if OBSTACLE_LINK in ports else "")
               + f", speed {args.speed:g}x", file=sys.stderr, flush=True)
-        with server:
-            try:
-                server.run(duration)
-            except KeyboardInterrupt:
-                print("mavsim: interrupted", file=sys.stderr)
+        with server, _stop_on_signals(server) as interrupted:
+            server.run(duration)
+        if interrupted:
+            print(f"mavsim: stopped by {interrupted[0]}", file=sys.stderr)
         summary = sim.summary()
     if args.json:
         print(json.dumps(summary, indent=2))

@@ -126,12 +126,13 @@ def test_that_every_packet_the_companion_sends_goes_to_the_autopilot_and_none_to
             rogue.sock.close()
         sim.send_signal(signal.SIGINT)
         try:
-            sim_out, _ = sim.communicate(timeout=10)
+            sim_out, sim_err = sim.communicate(timeout=10)
         except subprocess.TimeoutExpired:
             sim.kill()
-            sim_out, _ = sim.communicate()
+            sim_out, sim_err = sim.communicate()
     assert fly.stdout.strip().startswith("{"), fly.stderr[-2000:]
     report = json.loads(fly.stdout)
+    assert "{" in sim_out, f"mavsim printed no summary (rc {sim.returncode}): {sim_err[-2000:]}"
     truth = json.loads(sim_out[sim_out.index("{"):])
     assert any("ENGAGED" in text for _, text in report["events"]) and truth["goal_reached"] is True and not truth["collided"]
     assert on_autopilot_port.sent > 50 and on_obstacle_port.sent > 50
