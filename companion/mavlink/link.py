@@ -403,14 +403,15 @@ class MavutilLink(Link):
         # udpin (server): one reply address, chosen here, instead of pymavlink's send-to-all.
         self._server = url.startswith(("udpin:", "udp:")) and getattr(self._conn, "udp_server", False)
         self._address_of: dict[tuple[int, int], tuple] = {}
-        self._last_address: tuple | None = None
         logger.info("opened MAVLink connection %s as system %d component %d", url, *self.key)
 
     def destination(self) -> tuple | None:
-        """Where a udpin link sends: the peer's last address, or the last address heard before
-        the peer is known; None when the peer is known but has not been heard on this link."""
+        """Where a udpin link sends: the peer's last address; None (nothing is sent, it is
+        counted as unaddressed) while the peer is unknown or not heard on this link. Before
+        the loop knows its autopilot it answers nobody: the first sender heard may be an
+        obstacle source, and the autopilot streams to the companion unasked."""
         if self.peer is None:
-            return self._last_address
+            return None
         return self._address_of.get(self.peer)
 
     def _write(self, packet: bytes) -> None:
@@ -441,8 +442,6 @@ class MavutilLink(Link):
                     key = (rx.msg.get_srcSystem(), rx.msg.get_srcComponent())
                     if key in self._address_of or len(self._address_of) < 256:
                         self._address_of[key] = address
-                if received:
-                    self._last_address = address
                 out.extend(received)
                 continue
             try:

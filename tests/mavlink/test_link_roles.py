@@ -83,19 +83,24 @@ def test_that_a_udpin_link_sends_only_to_the_autopilots_address_never_to_every_a
         rogue.close()
 
 
-def test_that_before_the_autopilot_is_known_a_udpin_link_answers_the_last_address_only():
+def test_that_before_the_autopilot_is_known_a_udpin_link_sends_to_nobody_and_counts_it():
+    """A rogue heard first must not get the companion's HEARTBEATs (a clean-clone CI run caught
+    three going to an obstacle source on the autopilot port before PX4 was heard)."""
     port = _free_port()
     link = open_link(f"udpin:127.0.0.1:{port}", clock=time.time)
-    first, first_mav = _peer(9, 1)
-    last, last_mav = _peer(10, 1)
+    rogue, rogue_mav = _peer(150, 197)
+    autopilot, ap_mav = _peer(1, 1)
     try:
-        for sock, mav in ((first, first_mav), (last, last_mav)):
-            sock.sendto(mavlink2.MAVLink_heartbeat_message(0, 8, 0, 0, 4, 3).pack(mav), ("127.0.0.1", port))
-            time.sleep(0.05)
-        assert _hear(link, 2) == {9, 10}
+        rogue.sendto(mavlink2.MAVLink_heartbeat_message(0, 8, 0, 0, 4, 3).pack(rogue_mav), ("127.0.0.1", port))
+        assert _hear(link, 1) == {150}
         link.send(messages.companion_heartbeat())
-        assert _drain(last) == 1 and _drain(first) == 0
+        assert _drain(rogue) == 0 and link.stats.unaddressed == 1
+        autopilot.sendto(mavlink2.MAVLink_heartbeat_message(2, 12, 1, 0, 3, 3).pack(ap_mav), ("127.0.0.1", port))
+        assert _hear(link, 1) == {1}
+        link.peer = (1, 1)
+        link.send(messages.companion_heartbeat())
+        assert _drain(autopilot) == 1 and _drain(rogue) == 0
     finally:
         link.close()
-        first.close()
-        last.close()
+        rogue.close()
+        autopilot.close()

@@ -45,6 +45,7 @@ def test_that_companion_receives_vehicle_traffic_and_answers_the_sender(pair):
     assert got[0].msg.get_srcComponent() == 1
     assert abs(got[0].t_s - time.time()) < 5.0
 
+    companion.peer = (got[0].msg.get_srcSystem(), got[0].msg.get_srcComponent())  # the loop names its autopilot
     sent = companion.send(M.velocity_setpoint(10, [1.0, 0.0, 0.0]))
     back = poll_until(vehicle, lambda g: len(g) >= 1)
     assert [r.raw for r in back] == [sent]
