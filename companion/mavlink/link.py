@@ -33,8 +33,9 @@ stamped ``t_s + tlog_offset_s`` (see :mod:`companion.mavlink.tlog`).
 Roles. Each link has a ``name`` that every :class:`Received` carries: ``"autopilot"``
 (the one link setpoints and commands go to) or ``"obstaclesN"`` (receive-only: sending
 on it raises). On a ``udpin`` autopilot link the companion answers one address only:
-the one the autopilot (:attr:`Link.peer`, set by the loop) last sent from, or before
-the autopilot is known, the last address heard. pymavlink's own ``udpin`` writer
+the one the autopilot (:attr:`Link.peer`, set by the loop) last sent from, and none
+before the autopilot is known (what would have gone is counted in
+``stats.unaddressed``). pymavlink's own ``udpin`` writer
 sends every packet to every address it has heard, which would hand setpoints to any
 other system that talks to the port.
 """
