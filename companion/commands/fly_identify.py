@@ -62,6 +62,8 @@ class _StepFlyer:
                     hb = messages.decode_heartbeat(msg)
                     if hb.is_autopilot:
                         self.hb = hb
+                        if self.link.peer is None:  # a udpin link answers the autopilot only, once known
+                            self.link.peer = (msg.get_srcSystem(), msg.get_srcComponent())
                 elif kind == "HOME_POSITION":
                     self.home_alt_m = msg.altitude * 1e-3
                 elif kind == "LOCAL_POSITION_NED":
