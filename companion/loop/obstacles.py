@@ -30,6 +30,7 @@ Nothing is dropped silently: every rejection is counted per source and reason
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import Counter
@@ -147,7 +148,7 @@ class ObstacleIntake:
                     self._measured_geoid_m = n
                     self._geoid_wanted = False
                     if self.origin is not None:
-                        self.origin = traffic.GlobalOrigin(self.origin.lat_deg, self.origin.lon_deg, self.origin.alt_m, n)
+                        self.origin = dataclasses.replace(self.origin, geoid_separation_m=n)
             return False  # the vehicle side may use it too
         if mtype == "GPS_GLOBAL_ORIGIN":
             if on_autopilot_link and autopilot is not None and key[0] == autopilot[0]:
