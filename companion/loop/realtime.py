@@ -22,6 +22,7 @@ are one mechanism; the obstacle backlog is its own module, :mod:`companion.loop.
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 import multiprocessing
@@ -35,6 +36,7 @@ from typing import Callable
 from companion.core.planner import Planner, PlannerConfig
 from companion.loop.app import Companion
 from companion.loop.backlog import ObstacleBacklog
+from companion.loop.collector import collector_for_real_time
 from companion.loop.planning import PlanResult
 from companion.loop.request_builder import ReplanJob
 from companion.loop.tlog_marks import TlogMarks
@@ -66,6 +68,7 @@ class WorkerStats:
 def _serve(conn: Connection, config: PlannerConfig, make_planner: Callable[[PlannerConfig], Planner]) -> None:
     """The planning process: solve each ``(seq, request, warm_start)`` received, send ``(seq, plan, error)``."""
     planner = make_planner(config)
+    gc.freeze()  # what exists now is never walked again: a full collection would add ~100 ms to a solve
     conn.send("ready")
     while True:
         try:
@@ -84,7 +87,7 @@ def _serve(conn: Connection, config: PlannerConfig, make_planner: Callable[[Plan
 class PlanWorker:
     """A planning process behind the :class:`~companion.loop.planning.PlanningService` protocol.
 
-    The solve runs in its own process (``spawn``), not a thread: measured on a loaded
+    The solve runs in its own process, not a thread: measured on a loaded
     2-core machine, a planning *thread* starved the stream thread of the GIL (ticks up to
     365 ms, gaps up to 442 ms, 15 Hz; see ``docs/REALTIME.md``). One job is in flight at a
     time; a job submitted meanwhile waits in a one-slot mailbox and a newer one replaces it.
@@ -269,6 +272,8 @@ class StreamStats:
     obstacle_handling_s: float = 0.0
     obstacles_handled_max: int = 0
     cpu_s: float = 0.0
+    collections: int = 0
+    max_collection_s: float = 0.0
 
     def note_setpoint(self, t_s: float) -> None:
         if self.last_setpoint_s is not None:
@@ -292,6 +297,8 @@ class StreamStats:
             "setpoint_gap_max_at_s": round(sum(gaps[: gaps.index(max(gaps)) + 1]), 2) if gaps else None,
             "setpoint_gaps_over_150ms": sum(g > gap_limit_s for g in gaps),
             "tick_max_ms": round(self.max_tick_s * 1e3, 1),
+            "gc_collections": self.collections,
+            "gc_pause_max_ms": round(self.max_collection_s * 1e3, 1),
             "inbound_dropped": self.inbound_dropped,
             "inbound_superseded": self.inbound_superseded,
             "obstacle_handling_share": round(self.obstacle_handling_s / self.wall_s, 3) if self.wall_s > 0 else None,
@@ -367,53 +374,55 @@ def run_realtime(
     next_tick = start
     budget_s = obstacle_share * period  # obstacle handling left in this period
     handled_in_period = 0
-    while True:
-        now = clock()
-        if duration_s is not None and now - start >= duration_s:
-            break
-        for rx in link.poll():  # the autopilot's messages at once (its first HEARTBEAT makes it known)
-            autopilot = companion.autopilot
-            if rx.msg.get_type() == "HEARTBEAT" or (autopilot is not None and rx.msg.get_srcSystem() == autopilot[0]):
-                handle(rx)
-            else:
-                others.put(rx)
-        for obstacle_link in obstacle_links:  # obstacle traffic only: never ahead of the autopilot
-            for rx in obstacle_link.poll():
-                others.put(rx)
-        link.peer = companion.autopilot  # commands go to the autopilot's address only
-        now = clock()
-        if now >= next_tick:
-            companion.on_signatures_rejected(_signatures_rejected((link, *obstacle_links)))
-            if marks is not None:
-                marks.tick(now)
-            outbox = companion.tick(now)
-            for msg in outbox:
-                packet = link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times
-                if tlog is not None:
-                    tlog.write(now, packet)
-            if outbox and outbox[-1].get_type() == _SETPOINT:
-                stats.note_setpoint(now)
-            stats.ticks += 1
-            stats.max_tick_s = max(stats.max_tick_s, clock() - now)
-            next_tick += period
-            if next_tick < now:
-                stats.late_ticks += 1
-                next_tick = now + period
-            budget_s, handled_in_period = obstacle_share * period, 0
-            if stop is not None and stop(companion):
+    with collector_for_real_time() as pauses:  # a full collection of the startup heap stopped the stream ~100 ms
+        while True:
+            now = clock()
+            if duration_s is not None and now - start >= duration_s:
                 break
-        t_prev = clock()
-        while others and budget_s > 0.0 and (t_prev < next_tick or handled_in_period == 0):
-            handle(others.take())
-            handled_in_period += 1
-            t_now = clock()
-            budget_s -= t_now - t_prev
-            stats.obstacle_handling_s += t_now - t_prev
-            t_prev = t_now
-        stats.obstacles_handled_max = max(stats.obstacles_handled_max, handled_in_period)
-        sleep(max(0.0, min(poll_period_s, next_tick - clock())))
+            for rx in link.poll():  # the autopilot's messages at once (its first HEARTBEAT makes it known)
+                autopilot = companion.autopilot
+                if rx.msg.get_type() == "HEARTBEAT" or (autopilot is not None and rx.msg.get_srcSystem() == autopilot[0]):
+                    handle(rx)
+                else:
+                    others.put(rx)
+            for obstacle_link in obstacle_links:  # obstacle traffic only: never ahead of the autopilot
+                for rx in obstacle_link.poll():
+                    others.put(rx)
+            link.peer = companion.autopilot  # commands go to the autopilot's address only
+            now = clock()
+            if now >= next_tick:
+                companion.on_signatures_rejected(_signatures_rejected((link, *obstacle_links)))
+                if marks is not None:
+                    marks.tick(now)
+                outbox = companion.tick(now)
+                for msg in outbox:
+                    packet = link.send(msg, t_s=now)  # stamped with the tick time: replay ticks at the same times
+                    if tlog is not None:
+                        tlog.write(now, packet)
+                if outbox and outbox[-1].get_type() == _SETPOINT:
+                    stats.note_setpoint(now)
+                stats.ticks += 1
+                stats.max_tick_s = max(stats.max_tick_s, clock() - now)
+                next_tick += period
+                if next_tick < now:
+                    stats.late_ticks += 1
+                    next_tick = now + period
+                budget_s, handled_in_period = obstacle_share * period, 0
+                if stop is not None and stop(companion):
+                    break
+            t_prev = clock()
+            while others and budget_s > 0.0 and (t_prev < next_tick or handled_in_period == 0):
+                handle(others.take())
+                handled_in_period += 1
+                t_now = clock()
+                budget_s -= t_now - t_prev
+                stats.obstacle_handling_s += t_now - t_prev
+                t_prev = t_now
+            stats.obstacles_handled_max = max(stats.obstacles_handled_max, handled_in_period)
+            sleep(max(0.0, min(poll_period_s, next_tick - clock())))
     stats.wall_s = clock() - start
     stats.cpu_s = time.process_time() - cpu_start
+    stats.collections, stats.max_collection_s = pauses.collections, pauses.max_pause_s
     stats.inbound_backlog_at_end = len(others)
     stats.inbound_dropped = others.dropped
     stats.inbound_superseded = others.superseded

@@ -35,4 +35,4 @@ def test_that_the_stream_holds_20_hz_and_the_flight_is_safe_with_200_extra_obsta
     lost = [t for t in events if t.startswith(("PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP"))]
     assert not lost, lost
     assert summary["setpoint_rate_hz"] >= 19.5, summary["setpoint_rate_hz"]
-    assert summary["setpoint_gaps_over_150ms"] == 0, (summary["setpoint_gap_max_ms"], summary["tick_max_ms"])
+    assert summary["setpoint_gaps_over_150ms"] == 0, {k: summary[k] for k in ("setpoint_gap_max_ms", "tick_max_ms", "gc_pause_max_ms")}
