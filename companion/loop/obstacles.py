@@ -87,6 +87,38 @@ def _reason_code(reason: str) -> str:
     return reason.split(" (")[0].split(":")[0].strip()[:40]
 
 
+class _MessageRequest:
+    """Asks the autopilot for one message (MAV_CMD_REQUEST_MESSAGE) every period while it is wanted.
+
+    ``wanted`` is set by the intake when something waits for the message and cleared when
+    it arrives; at most ``max_requests`` are sent in all (None: no limit).
+    """
+
+    def __init__(self, message_id: int, period_s: float, max_requests: int | None = None) -> None:
+        self.message_id = message_id
+        self.period_s = period_s
+        self.max_requests = max_requests
+        self.wanted = False
+        self.sent = 0
+        self._last_t = -math.inf
+
+    def due(self, t_s: float, autopilot: tuple[int, int] | None):
+        """The request to send at link time ``t_s`` (a COMMAND_LONG), or None."""
+        if not self.wanted or autopilot is None or t_s - self._last_t < self.period_s:
+            return None
+        if self.max_requests is not None and self.sent >= self.max_requests:
+            return None
+        self._last_t = t_s
+        self.sent += 1
+        return messages.command_long(mavlink2.MAV_CMD_REQUEST_MESSAGE, (self.message_id,),
+                                     target_system=autopilot[0], target_component=autopilot[1])
+
+    @property
+    def exhausted(self) -> bool:
+        """True once the last allowed request has been sent."""
+        return self.max_requests is not None and self.sent >= self.max_requests
+
+
 class ObstacleIntake:
     """Routes traffic to the tracker; counts and announces what it cannot use.
 
@@ -121,12 +153,10 @@ class ObstacleIntake:
         self._texts: list[tuple[Severity, str]] = []
         self._last_text_t = -math.inf
         self._announced = 0
-        self._origin_wanted = False
-        self._last_origin_request = -math.inf
+        self._origin_request = _MessageRequest(MSG_GPS_GLOBAL_ORIGIN, _ORIGIN_REQUEST_PERIOD_S)
         self._measured_geoid_m: float | None = None  # from the autopilot's GPS_RAW_INT
-        self._geoid_wanted = False
-        self._last_geoid_request = -math.inf
-        self._geoid_requests = 0
+        self._geoid_request = _MessageRequest(MSG_GPS_RAW_INT, _ORIGIN_REQUEST_PERIOD_S, _MAX_GEOID_REQUESTS)
+        self._geoid_given_up = False
 
     def geoid_separation_m(self) -> float | None:
         """Geoid above the WGS-84 ellipsoid (m): the autopilot's GPS_RAW_INT, else configured, else None."""
@@ -146,7 +176,7 @@ class ObstacleIntake:
                 if n is not None and n != self._measured_geoid_m:
                     logger.info("geoid separation %.2f m (GPS_RAW_INT alt_ellipsoid - alt)", n)
                     self._measured_geoid_m = n
-                    self._geoid_wanted = False
+                    self._geoid_request.wanted = False
                     if self.origin is not None:
                         self.origin = dataclasses.replace(self.origin, geoid_separation_m=n)
             return False  # the vehicle side may use it too
@@ -156,7 +186,7 @@ class ObstacleIntake:
                 if origin != self.origin:
                     logger.info("GPS_GLOBAL_ORIGIN %.7f %.7f %.2f m", origin.lat_deg, origin.lon_deg, origin.alt_m)
                 self.origin = origin
-                self._origin_wanted = False
+                self._origin_request.wanted = False
             elif not on_autopilot_link:
                 self._reject(f"{link} sys {key[0]}", "GPS_GLOBAL_ORIGIN not from the autopilot", rx.t_s)
             return True
@@ -198,9 +228,9 @@ class ObstacleIntake:
             self._reject(source, f"{reason}: {mtype}", rx.t_s)
             return
         if mtype in traffic.GLOBAL_KINDS and self.origin is None:
-            self._origin_wanted = True
+            self._origin_request.wanted = True
         if mtype in ELLIPSOID_KINDS and self._measured_geoid_m is None:
-            self._geoid_wanted = True  # ask the autopilot even when one is configured: its receiver knows better
+            self._geoid_request.wanted = True  # ask the autopilot even when one is configured: its receiver knows better
         decoded = traffic.decode_traffic(msg, self.origin)
         if isinstance(decoded, messages.Rejected):
             self._reject(source, f"{mtype} {_reason_code(decoded.reason)}", rx.t_s)
@@ -280,23 +310,18 @@ class ObstacleIntake:
         has none measured, each every 2 s; summarises new rejections in one STATUSTEXT per period.
         """
         out: list = []
-        if self._origin_wanted and autopilot is not None and t_s - self._last_origin_request >= _ORIGIN_REQUEST_PERIOD_S:
-            self._last_origin_request = t_s
-            out.append(messages.command_long(mavlink2.MAV_CMD_REQUEST_MESSAGE, (MSG_GPS_GLOBAL_ORIGIN,),
-                                             target_system=autopilot[0], target_component=autopilot[1]))
-        if self._geoid_wanted and autopilot is not None and t_s - self._last_geoid_request >= _ORIGIN_REQUEST_PERIOD_S \
-                and self._geoid_requests < _MAX_GEOID_REQUESTS:
-            self._last_geoid_request = t_s
-            self._geoid_requests += 1
-            if self._geoid_requests == _MAX_GEOID_REQUESTS:
-                text = ("no geoid separation from the autopilot (GPS_RAW_INT alt_ellipsoid) after "
-                        f"{_MAX_GEOID_REQUESTS} requests: " + ("using [traffic] geoid_separation_m"
-                        if self.config.geoid_separation_m is not None else
-                        "UTM and Remote ID reports stay rejected; set [traffic] geoid_separation_m"))
-                logger.warning("%s", text)
-                self.warnings.append(text)
-            out.append(messages.command_long(mavlink2.MAV_CMD_REQUEST_MESSAGE, (MSG_GPS_RAW_INT,),
-                                             target_system=autopilot[0], target_component=autopilot[1]))
+        for request in (self._origin_request, self._geoid_request):
+            msg = request.due(t_s, autopilot)
+            if msg is not None:
+                out.append(msg)
+        if self._geoid_request.exhausted and not self._geoid_given_up:
+            self._geoid_given_up = True
+            text = ("no geoid separation from the autopilot (GPS_RAW_INT alt_ellipsoid) after "
+                    f"{_MAX_GEOID_REQUESTS} requests: " + ("using [traffic] geoid_separation_m"
+                    if self.config.geoid_separation_m is not None else
+                    "UTM and Remote ID reports stay rejected; set [traffic] geoid_separation_m"))
+            logger.warning("%s", text)
+            self.warnings.append(text)
         texts, self._texts = self._texts, []
         total = sum(self.rejected.values())
         if total > self._announced and t_s - self._last_text_t >= self.config.statustext_period_s:
