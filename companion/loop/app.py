@@ -290,6 +290,7 @@ class Companion:
             self.state.goal_reached_t_s = t_s
             self.sequencer.on_goal_reached(t_s)
             said.append(self._say(t_s, SEV_INFO, "companion: goal reached"))
+        self.state.tracks_beyond_walls_max = max(self.state.tracks_beyond_walls_max, len(job.tracks_beyond_walls))
         left_out = len(job.tracks_unconstrained)
         if left_out:
             self.state.tracks_unconstrained_max = max(self.state.tracks_unconstrained_max, left_out)

@@ -108,6 +108,8 @@ class CompanionState:
     drone_rejections: int = 0
     messages_rejected: int = 0
     tracks_unconstrained_max: int = 0
+    #: most tracks set apart as beyond a wall for a whole horizon in one replan (no rows needed)
+    tracks_beyond_walls_max: int = 0
     #: smallest realised contour of touch over every replan request (also those whose plan
     #: never came back or was superseded in real time); None until an obstacle was in range
     min_realised_contour: float | None = None

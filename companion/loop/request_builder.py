@@ -19,7 +19,7 @@ from companion.core.overlap import contour_of_touch
 from companion.core.planner import Plan, PlanRequest
 from companion.loop.config import CompanionScenario
 from companion.loop.perception import Perception
-from companion.loop.track_selection import choose, confidence_radius, rank_by_risk
+from companion.loop.track_selection import beyond_walls, choose, confidence_radius, rank_by_risk
 
 logger = logging.getLogger(__name__)
 
@@ -49,6 +49,9 @@ class ReplanJob:
         Tracks left out of ``request`` (over the constrained-track limit).
     tracks_constrained : tuple
         The tracks in ``request``, in its obstacle order (static obstacles follow them).
+    tracks_beyond_walls : tuple
+        Tracks beyond a wall for the whole horizon: no rows needed (see
+        :func:`~companion.loop.track_selection.beyond_walls`); neither constrained nor left out.
     """
 
     seq: int
@@ -65,6 +68,7 @@ class ReplanJob:
     realised_contour: dict
     tracks_unconstrained: tuple = ()
     tracks_constrained: tuple = ()
+    tracks_beyond_walls: tuple = ()
 
 
 class RequestBuilder:
@@ -177,8 +181,9 @@ class RequestBuilder:
         tracker.prune(t_v)
         times = t_v + tau * np.arange(1, n + 1)
         keys = list(tracker.keys())
-        constrained, left_out = self._select(keys, perception, t_v, position, initial_velocity, cov_now)
-        now_left_out = self._estimates_now(left_out, perception, t_v)
+        near, beyond = self._split_beyond_walls(keys, perception, t_v)
+        constrained, left_out = self._select(near, perception, t_v, position, initial_velocity, cov_now)
+        now_left_out = self._estimates_now(left_out + beyond, perception, t_v)
         means, covs, radii, now_pos, now_cov = [], [], [], {}, {}
         for key in constrained:
             m, c = tracker.predict(key, times)
@@ -222,9 +227,30 @@ class RequestBuilder:
             realised_contour=self._realised_contour(position, cov_now, keys, now_pos, now_cov),
             tracks_unconstrained=tuple(left_out),
             tracks_constrained=tuple(constrained),
+            tracks_beyond_walls=tuple(beyond),
         )
 
     # ------------------------------------------------------------------ many tracks
+
+    def _split_beyond_walls(self, keys: list, perception: Perception, t_v: float) -> tuple[list, list]:
+        """The tracks that may reach the drone's side of the walls, and those beyond a wall for the whole horizon.
+
+        See :func:`~companion.loop.track_selection.beyond_walls`: a track beyond a wall at
+        every step of the request with its ``c_min`` ellipsoid and radius cannot come within
+        ``c_min`` of a plan that keeps to the walls, so it needs no rows. Tracker order is kept.
+        """
+        if not keys or not self.scenario.walls:
+            return keys, []
+        n, tau = self.cfg.horizon_steps, self.cfg.step_s
+        states = [perception.tracker.state(k) for k in keys]
+        lags = (t_v + tau * np.arange(1, n + 1))[None, :] - np.array([s.t_s for s in states])[:, None]
+        beyond = beyond_walls(
+            np.array([s.mean for s in states]), np.array([s.cov for s in states]), lags,
+            perception.tracker.config.accel_noise_psd_m2ps3,
+            self.scenario.walls_normal, self.scenario.walls_offset,
+            np.array([self.obstacle_radius(k) for k in keys], dtype=float), self._sigmas,
+        )
+        return [k for k, b in zip(keys, beyond) if not b], [k for k, b in zip(keys, beyond) if b]
 
     def _select(self, keys: list, perception: Perception, t_v: float, position, velocity, cov_now) -> tuple[list, list]:
         """The tracks to constrain (tracker order) and those left out (riskiest first), see :mod:`~companion.loop.track_selection`.

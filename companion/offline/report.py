@@ -43,6 +43,7 @@ def companion_report(companion: Companion) -> dict:
         "stale_events": state.stale_events,
         "old_plan_events": state.old_plan_events,
         "tracks_unconstrained_max": state.tracks_unconstrained_max,
+        "tracks_beyond_walls_max": state.tracks_beyond_walls_max,
         "messages_rejected": state.messages_rejected,
         "obstacle_reports_rejected": state.obstacle_rejections + companion.obstacles.summary()["rejected_total"],
         "tracks": len(companion.tracker),

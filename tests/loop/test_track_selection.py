@@ -101,3 +101,74 @@ def test_that_the_request_builder_takes_each_tracks_radius_from_its_lookup():
     # the bigger body reaches the drone's contour sooner: a smaller realised contour of touch
     assert sized.realised_contour[big] < plain.realised_contour[big]
     assert sized.realised_contour[default] == plain.realised_contour[default]
+
+
+def test_that_beyond_walls_checks_the_trackers_own_prediction_at_every_step():
+    from estimator import ObstacleTracker, TrackerConfig
+
+    from companion.loop.track_selection import beyond_walls
+
+    tracker = ObstacleTracker(TrackerConfig(accel_noise_psd_m2ps3=0.05))
+    walls_n, walls_b = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]]), np.array([1.5, 1.5])  # |y| <= 1.5
+    rng = np.random.default_rng(7)
+    for k in range(60):
+        p = np.array([rng.uniform(-5, 30), rng.choice([-1, 1]) * rng.uniform(0.0, 9.0), -5.0])
+        v = np.array([rng.uniform(-1, 1), rng.uniform(-1.5, 1.5), 0.0])
+        tracker.update(k, 0.0, p, v, rng.uniform(0.01, 0.3) * np.eye(3), 0.05 * np.eye(3))
+    keys = tracker.keys()
+    t_v, times = 0.4, 0.4 + 0.3 * np.arange(1, 21)
+    states = [tracker.state(k) for k in keys]
+    radii = rng.uniform(0.3, 1.0, len(keys))
+    r = confidence_radius(0.3)
+    got = beyond_walls(np.array([s.mean for s in states]), np.array([s.cov for s in states]),
+                       times[None, :] - np.array([s.t_s for s in states])[:, None], 0.05, walls_n, walls_b, radii, r)
+    for j, key in enumerate(keys):  # the same question asked step by step of the tracker's prediction
+        means, covs = tracker.predict(key, times)
+        clear = [max(a @ m - b - r * np.sqrt(a @ c @ a) - radii[j] for a, b in zip(walls_n, walls_b))
+                 for m, c in zip(means, covs)]
+        assert got[j] == (min(clear) >= 0.0), (key, min(clear))
+    assert 0 < got.sum() < len(keys)  # both kinds drawn
+    assert not beyond_walls(np.zeros((2, 6)), np.tile(np.eye(6), (2, 1, 1)), np.ones((2, 3)), 0.1,
+                            np.zeros((0, 3)), np.zeros(0), np.ones(2), r).any()  # no walls: nothing set apart
+
+
+def test_that_a_drone_kept_inside_a_wall_and_a_track_beyond_it_never_touch_at_c_min():
+    """The claim :func:`beyond_walls` rests on, checked with the exact contour of touch (point bodies)."""
+    from companion.core.overlap import contour_of_touch
+
+    rng = np.random.default_rng(3)
+    r = confidence_radius(0.9)
+    worst = 1.0
+    for _ in range(500):
+        a = rng.normal(size=3)
+        a /= np.linalg.norm(a)
+        b = rng.uniform(-3.0, 3.0)
+        s_d, s_o = (m @ m.T * rng.uniform(0.01, 2.0) + 0.01 * np.eye(3) for m in rng.normal(size=(2, 3, 3)))
+        slide_d, slide_o = (t - a * (a @ t) for t in rng.normal(size=(2, 3)) * 5.0)  # anywhere along the wall
+        drone = a * (b - r * np.sqrt(a @ s_d @ a)) + slide_d    # on its wall limit (the exact wall recheck)
+        track = a * (b + r * np.sqrt(a @ s_o @ a)) + slide_o    # just beyond, as beyond_walls demands
+        worst = min(worst, float(contour_of_touch(drone, s_d, track, s_o)))
+    assert worst >= 0.9 - 1e-9
+
+
+def test_that_in_a_corridor_the_crowd_outside_its_walls_needs_no_rows_and_a_track_heading_in_does():
+    from companion.loop.perception import Perception
+    from companion.loop.request_builder import RequestBuilder
+
+    scenario = load_scenario("configs/corridor.toml")
+    perception = Perception(scenario)
+    perception.drone.update(0.0, np.array([0.0, 0.0, -5.0]), np.zeros(3), np.full(3, 0.01), np.full(3, 0.01))
+    rng = np.random.default_rng(5)
+    crowd = np.column_stack([rng.uniform(-5, 30, 200), rng.choice([-1, 1], 200) * rng.uniform(6, 10, 200), np.full(200, -5.0)])
+    for k, p in enumerate(crowd):
+        perception.tracker.update((30 + k, 198, "obstacles1"), 0.0, p, np.zeros(3), 0.04 * np.eye(3), 0.01 * np.eye(3))
+    leader, inbound = (2, 1, "obstacles1"), (3, 1, "obstacles1")
+    perception.tracker.update(leader, 0.0, np.array([3.0, 0.0, -5.0]), np.array([1.0, 0.0, 0.0]), 0.02 * np.eye(3), 0.01 * np.eye(3))
+    perception.tracker.update(inbound, 0.0, np.array([12.0, 8.0, -5.0]), np.array([0.0, -2.0, 0.0]),  # through the wall in 3 s
+                              0.02 * np.eye(3), 0.01 * np.eye(3))
+    job = RequestBuilder(scenario).build(seq=0, t_s=0.0, t_v=0.0, perception=perception,
+                                         initial_velocity=np.zeros(3), warm_start=None)
+    assert set(job.tracks_constrained) == {leader, inbound}
+    assert len(job.tracks_beyond_walls) == 200 and not job.tracks_unconstrained
+    assert job.request.num_obstacles == 2 + len(scenario.static_obstacles)
+    assert len(job.realised_contour) == 202  # still measured, every one
