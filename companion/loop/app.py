@@ -54,6 +54,9 @@ Outbox = list[mavlink2.MAVLink_message]
 #: NAMED_VALUE_FLOAT sent at the tick a plan arrives when that is later than its request
 #: (real time): the value is the replan's number, so a replay applies it at the same tick.
 PLAN_ARRIVED = "plan_seq"
+#: NAMED_VALUE_FLOAT sent at the tick a job came back without a plan (the planning process
+#: raised): the value is the replan's number, so a replay drops that job at the same tick.
+PLAN_LOST = "plan_lost"
 
 
 class Companion:
@@ -230,6 +233,10 @@ class Companion:
         """
         said: Outbox = []
         for result in self.planning.collect():
+            if result.plan is None:
+                said.append(messages.named_value_float(int(round(t_s * 1000)), PLAN_LOST, float(result.job.seq)))
+                logger.warning("replan %d came back without a plan (planner error); the plan in force stays", result.job.seq)
+                continue
             if result.job.t_link_s != t_s:
                 said.append(messages.named_value_float(int(round(t_s * 1000)), PLAN_ARRIVED, float(result.job.seq)))
             if apply:
@@ -253,8 +260,12 @@ class Companion:
         if self.state.mode is LoopMode.STALE:
             said.append(self._say(t_s, SEV_NOTICE, "companion: estimate back, resuming"))
         self.builder.start_route(est.position)
-        # Replan every replan_period, also while braking for lack of a plan (no 20 Hz retry storm).
-        if self._last_replan_t is None or t_s - self._last_replan_t >= self.cfg.replan_period_s - 1e-9:
+        # Replan every replan_period, also while braking for lack of a plan (no 20 Hz retry storm),
+        # and only when the planner is free: a request built while it solves would wait for it
+        # (up to a replan period in the mailbox) and start from an older state. A slow solve
+        # thus stretches the period instead (the next request goes at the first tick after).
+        due = self._last_replan_t is None or t_s - self._last_replan_t >= self.cfg.replan_period_s - 1e-9
+        if due and not self.planning.busy:
             said.extend(self._request_plan(t_s, t_v))
         said.extend(self._collect_plans(t_s, apply=True))
         command, why = self.executor.follow(t_s, t_v)

@@ -1,7 +1,9 @@
 """How a replan reaches the planner and its plan comes back: the planning service protocol.
 
 The loop submits a :class:`~companion.loop.request_builder.ReplanJob` when a replan is due
-and collects :class:`PlanResult` s at every tick. :class:`InlinePlanning` solves at
+and the service is not :attr:`~PlanningService.busy` (a request is built only when the
+planner can take it at once, so it starts from the freshest state and none is built to be
+thrown away), and collects :class:`PlanResult` s at every tick. :class:`InlinePlanning` solves at
 submission, so the plan is applied at the tick that asked for it: lockstep runs and
 replays use it and are deterministic. The real-time edge passes a worker that solves
 beside the setpoint stream (:class:`companion.loop.realtime.PlanWorker`); the loop itself
@@ -25,13 +27,17 @@ class PlanResult:
     """The planner's answer to one job."""
 
     job: ReplanJob
-    plan: Plan
+    plan: Plan | None  #: None: the planner raised on this job (logged by the service), no plan came back
 
 
 class PlanningService(Protocol):
     """Where the loop sends replans and picks up plans."""
 
     planner: Planner  #: the planner that solves; the loop reads only its vehicle model (``planner.lag``)
+
+    @property
+    def busy(self) -> bool:
+        """A submitted job has not been collected yet (the loop then builds no new request)."""
 
     def submit(self, job: ReplanJob) -> None:
         """Ask for a plan (never blocks in real time; a newer job may supersede an unsolved one)."""
@@ -46,6 +52,11 @@ class InlinePlanning:
     def __init__(self, planner: Planner) -> None:
         self.planner = planner
         self._done: list[PlanResult] = []
+
+    @property
+    def busy(self) -> bool:
+        """Never: the plan is handed back in the tick that asked for it."""
+        return False
 
     def submit(self, job: ReplanJob) -> None:
         self._done.append(PlanResult(job, self.planner.solve(job.request, warm_start=job.warm_start)))

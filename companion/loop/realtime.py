@@ -6,9 +6,10 @@ the companion at its setpoint rate; a tick builds a replan's request when one is
 hands it to the :class:`PlanWorker` and sends the newest plan's command for the current
 time. It never waits for the planner: a tick costs the request building and the
 bookkeeping, not the solve. The *planning process* (:class:`PlanWorker`) solves one job
-at a time; a job submitted while another is being solved waits in a one-slot mailbox,
-and a newer one replaces it (counted as superseded), so the planner always works on the
-freshest state. A plan that comes back is applied at the next tick; the executor brakes
+at a time, and the loop builds a request only when it is free (:attr:`PlanWorker.busy`),
+so every solve starts from the freshest state; a job submitted before the process is
+ready waits in a one-slot mailbox (a newer one replaces it, counted as superseded).
+A plan that comes back is applied at the next tick; the executor brakes
 within the acceleration bound once the plan in force is older than ``[companion]
 max_plan_age_s`` (see :mod:`companion.loop.executor`).
 
@@ -90,7 +91,8 @@ class PlanWorker:
     The solve runs in its own process, not a thread: measured on a loaded
     2-core machine, a planning *thread* starved the stream thread of the GIL (ticks up to
     365 ms, gaps up to 442 ms, 15 Hz; see ``docs/REALTIME.md``). One job is in flight at a
-    time; a job submitted meanwhile waits in a one-slot mailbox and a newer one replaces it.
+    time (the loop submits only when :attr:`busy` is False); a job submitted meanwhile
+    waits in a one-slot mailbox and a newer one replaces it.
     A job is sent only when the process is idle (blocked in ``recv``), so sending never
     waits on a solve. The process is forked where the platform allows (it starts at once,
     with everything imported); it says when its planner is built (:meth:`wait_ready`),
@@ -131,7 +133,7 @@ class PlanWorker:
 
     @property
     def busy(self) -> bool:
-        """A job is being solved or waiting."""
+        """A job is being solved or waiting, or its answer has not been collected."""
         return self._in_flight is not None or self._pending is not None
 
     def submit(self, job: ReplanJob) -> None:
@@ -160,6 +162,7 @@ class PlanWorker:
             if plan is None:
                 self.stats.errors += 1
                 logger.error("planner failed on replan %d: %s", seq, error)
+                done.append(PlanResult(job, None))  # handed back so the loop knows the planner is free
             else:
                 self.stats.solved += 1
                 self.stats.max_solve_s = max(self.stats.max_solve_s, float(plan.solve_time_s))

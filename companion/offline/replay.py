@@ -79,7 +79,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink import messages
 from companion.core.planner import Planner
-from companion.loop.app import Companion
+from companion.loop.app import PLAN_LOST, Companion
 from companion.offline.replay_stand_ins import AssumeEngaged, RecordedArrivals, arrivals, signatures_rejected
 from companion.loop.records import status_counts
 from companion.errors import CompanionError
@@ -356,7 +356,7 @@ def replay(
     elif mode == "compare" and not lockstep:
         notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
 
-    realtime_plans = any(arrivals(ev.recorded) for ev in events if isinstance(ev, _Tick))
+    realtime_plans = any(arrivals(ev.recorded) or arrivals(ev.recorded, PLAN_LOST) for ev in events if isinstance(ev, _Tick))
     schedule = RecordedArrivals(Planner(scenario.planner)) if realtime_plans else None
     if realtime_plans:
         notes.append("plans applied at the ticks the recording announced their arrival (real-time planning)")
@@ -376,6 +376,7 @@ def replay(
         t = ev.t_us * 1e-6
         if schedule is not None:
             schedule.arrivals = arrivals(ev.recorded)
+            schedule.lost = arrivals(ev.recorded, PLAN_LOST)
         rejected = signatures_rejected(ev.recorded)
         if rejected is not None:  # what the recording's links counted (dropped packets are not in a tlog)
             companion.on_signatures_rejected(rejected)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 
 from companion.core.planner import Planner
-from companion.loop.app import PLAN_ARRIVED, SIGNATURE_TEXT
+from companion.loop.app import PLAN_ARRIVED, PLAN_LOST, SIGNATURE_TEXT
 from companion.loop.planning import PlanResult
 from companion.loop.request_builder import ReplanJob
 from companion.mavlink import messages
@@ -77,20 +77,38 @@ class RecordedArrivals:
     the replan's number). The replay sets :attr:`arrivals` from the recorded tick before
     each tick; a job is solved when its arrival comes, so the replayed planner solves the
     same jobs in the same order as the recorded one (its warm starts match) and its plan
-    is applied at the same tick. Jobs the recording never solved (superseded) are dropped.
+    is applied at the same tick. Jobs the recording never solved (superseded, in logs
+    from before requests waited for a free planner) are dropped; a job the recorded planner
+    raised on (NAMED_VALUE_FLOAT :data:`~companion.loop.app.PLAN_LOST`, set in :attr:`lost`)
+    is handed back without a plan at its recorded tick. The service is :attr:`busy` from a
+    request until its recorded arrival or loss, as the recorded planning process was, so
+    the replayed loop builds its requests at the recorded ticks.
     """
 
     def __init__(self, planner: Planner) -> None:
         self.planner = planner
         self.arrivals: list[int] = []
+        self.lost: list[int] = []
         self.missing = 0
         self._jobs: dict[int, ReplanJob] = {}
+
+    @property
+    def busy(self) -> bool:
+        """A replayed request whose recorded arrival (or loss) has not come yet."""
+        return bool(self._jobs)
 
     def submit(self, job: ReplanJob) -> None:
         self._jobs[job.seq] = job
 
     def collect(self) -> list[PlanResult]:
         done = []
+        for seq in self.lost:  # the recorded planner raised on these: handed back without a plan
+            job = self._jobs.pop(seq, None)
+            if job is None:
+                self.missing += 1
+            else:
+                done.append(PlanResult(job, None))
+        self.lost = []
         for seq in self.arrivals:
             job = self._jobs.pop(seq, None)
             if job is None:
@@ -119,9 +137,9 @@ def signatures_rejected(recorded: list) -> int | None:
     return None
 
 
-def arrivals(recorded: list) -> list[int]:
-    """Replan numbers announced as arrived among a recorded tick's messages."""
+def arrivals(recorded: list, name: str = PLAN_ARRIVED) -> list[int]:
+    """Replan numbers announced as arrived (or, with ``name=PLAN_LOST``, lost) among a recorded tick's messages."""
     return [
         int(m.value) for m in recorded
-        if m.get_type() == "NAMED_VALUE_FLOAT" and str(m.name).rstrip("\x00") == PLAN_ARRIVED
+        if m.get_type() == "NAMED_VALUE_FLOAT" and str(m.name).rstrip("\x00") == name
     ]

@@ -73,7 +73,8 @@ def test_that_a_stuck_planner_neither_delays_a_setpoint_nor_keeps_an_old_plan_fl
     assert np.allclose(np.diff(times), 0.05, atol=1e-6)
     assert stats.summary()["setpoint_gap_max_ms"] == 50.0
     assert companion.sequencer.phase.name == "ENGAGED"  # no false LINK_LOST while the planner is stuck
-    assert worker.stats.solved == 1 and worker.stats.superseded >= 5
+    # no request is built while the planner is busy: the stuck job is the last one (none waits to be thrown away)
+    assert worker.stats.solved == 1 and worker.stats.submitted == 2 and worker.stats.superseded == 0
 
     # plan 0 (requested at t = 0, applied at the next tick) is flown while it is fresh ...
     (record,) = companion.records

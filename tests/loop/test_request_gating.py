@@ -1,0 +1,104 @@
+"""Requests wait for a free planner; a job that comes back without a plan is announced and replayed as such."""
+
+from __future__ import annotations
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.core.planner import Planner
+from companion.loop.app import PLAN_ARRIVED, PLAN_LOST, Companion
+from companion.loop.config import load_scenario
+from companion.loop.planning import PlanResult
+from companion.mavlink.link import Received
+from companion.offline.replay_stand_ins import RecordedArrivals
+
+SCENARIO = "tests/data/short_hop.toml"
+
+
+class HeldPlanner:
+    """A planning service under test control: jobs wait until the test answers them."""
+
+    def __init__(self, planner: Planner) -> None:
+        self.planner = planner
+        self.waiting: list = []
+        self.answers: list[PlanResult] = []
+
+    @property
+    def busy(self) -> bool:
+        return bool(self.waiting) or bool(self.answers)
+
+    def submit(self, job) -> None:
+        self.waiting.append(job)
+
+    def answer(self, solve: bool) -> None:
+        job = self.waiting.pop(0)
+        plan = self.planner.solve(job.request, warm_start=job.warm_start) if solve else None
+        self.answers.append(PlanResult(job, plan))
+
+    def collect(self) -> list[PlanResult]:
+        done, self.answers = self.answers, []
+        return done
+
+
+def _feed(companion: Companion, t_s: float) -> list:
+    mav = mavlink2.MAVLink(None, 1, 1)
+    for msg in (mavlink2.MAVLink_heartbeat_message(2, 12, 157 | 128, 6 << 16, 4, 3),  # PX4 armed in OFFBOARD
+                mavlink2.MAVLink_local_position_ned_message(int(t_s * 1000), 0.0, 0.0, -5.0, 0.0, 0.0, 0.0)):
+        raw = bytes(msg.pack(mav))
+        companion.handle(Received(t_s, mav.parse_buffer(raw)[0], raw))
+    return companion.tick(t_s)
+
+
+def _named(out: list, name: str) -> list[int]:
+    return [int(m.value) for m in out if m.get_type() == "NAMED_VALUE_FLOAT" and m.name == name]
+
+
+def test_that_no_request_is_built_while_the_planner_is_busy_and_one_goes_at_the_first_tick_it_is_free():
+    scenario = load_scenario(SCENARIO)
+    service = HeldPlanner(Planner(scenario.planner))
+    companion = Companion(scenario, planning=service)
+    t = 0.0
+    while not service.waiting and t < 5.0:  # until engaged and the first request goes out
+        _feed(companion, t)
+        t = round(t + 0.05, 2)
+    assert len(service.waiting) == 1
+    first = service.waiting[0]
+    for _ in range(20):  # a second of a stuck planner: six replan periods, no new request
+        _feed(companion, t)
+        t = round(t + 0.05, 2)
+    assert [j.seq for j in service.waiting] == [first.seq]
+    service.answer(solve=True)
+    out = _feed(companion, t)  # the plan is collected here; the request check came first, still busy
+    assert _named(out, PLAN_ARRIVED) == [first.seq] and not service.waiting
+    t = round(t + 0.05, 2)
+    _feed(companion, t)  # free: the overdue replan goes at once, built from this tick's state
+    assert [j.seq for j in service.waiting] == [first.seq + 1] and service.waiting[0].t_link_s == t
+
+
+def test_that_a_job_without_a_plan_is_announced_the_plan_in_force_stays_and_a_replay_drops_it_at_that_tick():
+    scenario = load_scenario(SCENARIO)
+    service = HeldPlanner(Planner(scenario.planner))
+    companion = Companion(scenario, planning=service)
+    t = 0.0
+    while not service.waiting and t < 5.0:
+        _feed(companion, t)
+        t = round(t + 0.05, 2)
+    service.answer(solve=True)
+    _feed(companion, t)
+    plan = companion.executor.plan
+    assert plan is not None
+    for _ in range(6):  # the next request
+        t = round(t + 0.05, 2)
+        _feed(companion, t)
+    (job,) = service.waiting
+    service.answer(solve=False)  # the planning process raised on it
+    t = round(t + 0.05, 2)
+    out = _feed(companion, t)
+    assert _named(out, PLAN_LOST) == [job.seq] and not _named(out, PLAN_ARRIVED)
+    assert companion.executor.plan is plan and not service.busy
+
+    replayed = RecordedArrivals(Planner(scenario.planner))
+    replayed.submit(job)
+    assert replayed.busy
+    replayed.lost = [job.seq]
+    (result,) = replayed.collect()
+    assert result.job is job and result.plan is None and not replayed.busy and replayed.missing == 0
