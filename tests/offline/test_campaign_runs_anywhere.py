@@ -83,6 +83,29 @@ def test_that_a_campaign_killed_midway_resumes_to_the_uninterrupted_results(unin
     assert len(wall) == len(uninterrupted)
 
 
+def test_that_ctrl_c_ends_a_campaign_promptly_keeping_every_finished_run(tmp_path):
+    """Ctrl-C (SIGINT to the process group) cancels the queued runs instead of flying them all first."""
+    results = tmp_path / "runs.jsonl"
+    many = list(ARGS)
+    many[many.index("--episodes") + 1] = "200"  # 400 runs: minutes to fly them all
+    proc = subprocess.Popen(COMPANION + many + ["--workers", "2", "--results", str(results)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        _wait_for_rows(results, 1, proc, DEADLINE_S)
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        _, stderr = proc.communicate(timeout=60)
+        took = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+    assert proc.returncode == 130 and "Traceback" not in stderr, stderr[-2000:]
+    assert "queued runs cancelled" in stderr
+    rows = _rows(results)  # every line whole, none twice
+    assert 1 <= len(rows) < 100, (len(rows), took)
+
+
 def test_that_the_results_file_keeps_what_it_holds_and_drops_an_unfinished_line(tmp_path):
     path = tmp_path / "r.jsonl"
     header = campaign_header("crossing", 3, 0.9, 6.0)

@@ -16,7 +16,7 @@ from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_complet
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Callable, Iterator, Sequence
 
 from companion.errors import ConfigError, InputError, LinkError
 from companion.offline.campaign.generate import DEFAULT_DURATION_S, FAMILIES, METHODS, episode_sim_seed, generate_scenario
@@ -107,6 +107,27 @@ def open_executor(workers: int, scheduler: str | None = None) -> Iterator[tuple[
             yield pool, workers
 
 
+def _stop(futures: dict, take: Callable[[Future], None]) -> None:
+    """Interrupted (Ctrl-C): cancel the queued runs, and record the ones in flight as they finish.
+
+    Without this the executor's shutdown flew every queued run before the campaign ended
+    (a pool worker returns an interrupted run as its result and takes the next): up to
+    hours of runs whose results were then thrown away. A run in flight is bounded by one
+    episode; one interrupted in its worker (Ctrl-C reaches the whole process group) comes
+    back as KeyboardInterrupt and is not recorded: ``--resume`` flies it. A second
+    interrupt stops recording.
+    """
+    cancelled = sum(f.cancel() for f in futures)
+    running = [f for f in futures if not f.done()]
+    logger.warning("interrupted: %d queued runs cancelled; recording the %d in flight as they finish", cancelled, len(running))
+    try:
+        for fut in as_completed(running):
+            if not fut.cancelled() and not isinstance(fut.exception(), KeyboardInterrupt):
+                take(fut)
+    except KeyboardInterrupt:
+        logger.warning("interrupted again: the runs still in flight are not recorded")
+
+
 def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], seed: int, *,
                  workers: int | None = None, c_min: float = 0.90, duration_s: float = DEFAULT_DURATION_S,
                  progress: bool | str | None = None, results_path: str | Path | None = None, resume: bool = False,
@@ -157,13 +178,22 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
                     finished(run_episode(task))
             else:
                 futures: dict[Future, EpisodeTask] = {executor.submit(run_episode, task): task for task in todo}
-                for fut in as_completed(futures):
+
+                def take(fut: Future) -> None:
+                    nonlocal lost
                     try:
                         finished(fut.result())
                     except Exception as exc:  # the worker died (run_episode itself never raises)
                         task = futures[fut]
                         lost += 1
                         logger.error("episode %d method %s lost: %s: %s", task.index, task.method, type(exc).__name__, exc)
+
+                try:
+                    for fut in as_completed(futures):
+                        take(fut)
+                except KeyboardInterrupt:
+                    _stop(futures, take)
+                    raise
     finally:
         bar.close()
         if store is not None:
