@@ -25,9 +25,12 @@ Before any ranking, tracks **beyond a wall** for the whole horizon are set apart
 (:func:`beyond_walls`): at every step some wall's plane separates the track's ``c_min``
 confidence ellipsoid, grown by its body radius, from the side the drone is kept on.
 The drone's plan keeps its own ``c_min`` ellipsoid, grown by its radius, on the free side
-of every wall (the wall rows, and the exact recheck a plan must pass), so that plane
-separates the two ellipsoids: their contour of touch is at least ``c_min`` whatever the
-plan, and a row for the track would never bind. In a corridor, 200 systems reporting
+of every wall (the wall rows, and the exact recheck every plan without slack passes), so
+that plane separates the two grown ellipsoids whatever the plan: it is a hyperplane row
+with the wall's normal as separator, with the per-step collision bound ``Phi(-r_min)`` of
+any row, and a row for the track would never bind. (The contour of touch reported with
+radii is a lower bound taken at the minmax normal, not the wall's; for such a pair it can
+read below ``c_min`` although the plane separates them. docs/REALTIME.md has the argument.) In a corridor, 200 systems reporting
 from outside its walls then cost the planner nothing (before: the 8 riskiest were
 constrained, 8 times the corridor's one obstacle). Such tracks are counted
 (``ReplanJob.tracks_beyond_walls``), predicted and included in the realised contour of
