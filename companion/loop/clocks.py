@@ -117,6 +117,7 @@ class SourceClock:
         self._unit = 1.0
         self._bins: deque[list[float]] = deque(maxlen=_MAX_BINS)  # [bin start t_rx, t_rx at min, min offset]
         self._last_rel: float | None = None
+        self._fit: tuple[float, float, float] | None = None  # (offset at t_mean, drift, t_mean) of the bins now
 
     def _relative(self, raw: int | float, unit_s: float) -> float:
         assert self._origin is not None
@@ -128,9 +129,18 @@ class SourceClock:
         """(offset at ``t_rx``, drift) of the current epoch, or None before any stamp."""
         if not self._bins:
             return None
+        if self._fit is None:  # the bins changed since the last fit (each map() reads it twice)
+            self._fit = self._fit_envelope()
+        lower, drift, t_mean = self._fit
+        if math.isnan(t_mean):
+            return lower, drift
+        return lower + drift * (t_rx - t_mean), drift
+
+    def _fit_envelope(self) -> tuple[float, float, float]:
+        """(offset at the mean bin time, drift, that mean time) of the bins' lower envelope; NaN time: no drift yet."""
         pts = np.array([(b[1], b[2]) for b in self._bins])
         if len(pts) < self.min_bins_for_drift:
-            return float(pts[:, 1].min()), 0.0
+            return float(pts[:, 1].min()), 0.0, math.nan
         t, off = pts[:, 0], pts[:, 1]
         tc = t - t.mean()
         denom = float(np.dot(tc, tc))
@@ -138,7 +148,7 @@ class SourceClock:
         drift = max(-_MAX_DRIFT, min(_MAX_DRIFT, drift))
         line = off.mean() + drift * tc
         lower = float(off.mean() - np.max(line - off))  # lower the line onto the envelope
-        return lower + drift * (t_rx - t.mean()), drift
+        return lower, drift, t.mean()
 
     def map(self, raw: int | float, t_rx: float, unit_s: float = 1.0) -> Mapped:
         """Map one stamp; ``raw * unit_s`` is the sender's time in seconds.
@@ -180,11 +190,13 @@ class SourceClock:
         self._origin = raw if isinstance(raw, int) else float(raw)
         self._unit = unit_s
         self._bins.clear()
+        self._fit = None
         self._last_rel = None
         self.epochs += 1
         return True
 
     def _add(self, t_rx: float, offset: float) -> None:
+        self._fit = None
         if self._bins and t_rx - self._bins[-1][0] < self.bin_s:
             b = self._bins[-1]
             if offset < b[2]:
