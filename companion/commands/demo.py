@@ -124,6 +124,7 @@ def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out
 
 
 _FLY_START_S = 60.0
+_PORT_ATTEMPTS = 3  # fly started on fresh ports when one picked as free was taken meanwhile
 
 
 def _wait_for_listener(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
@@ -152,16 +153,14 @@ def _crowd(scenario: Path, n: int, seed: int, target_port: int, clock_port: int)
     return Crowd(positions_off_route(start, goal, n, seed=seed), ("127.0.0.1", target_port), clock_port).start()
 
 
-def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None) -> dict:
-    """mavsim and ``companion fly`` as two processes over loopback UDP; every wait is bounded.
+def _start_fly(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None, ports: list[int],
+               fly_duration_s: float) -> tuple[subprocess.Popen, list[str]]:
+    """Start ``companion fly`` on ``ports`` and wait (bounded) until it listens; its process and mavsim's command.
 
-    ``fly`` gets ``--duration`` (the scenario's duration plus 30 s) so it ends by itself;
-    should it not, it is stopped after another 60 s and the summary says so.
+    fly goes first: mavsim's clock starts when it does, and a companion still importing
+    would find the scenario's obstacles already on their way.
     """
-    from companion.loop.config import load_scenario
-
-    api_port, gcs_port, api_local, gcs_local, obstacle_port, obstacle_local = (_free_udp_port() for _ in range(6))
-    fly_duration_s = load_scenario(scenario).duration_s / max(args.speed, 1e-3) + 30.0
+    api_port, gcs_port, api_local, gcs_local, obstacle_port, obstacle_local = ports
     sim_cmd = [
         sys.executable, "-m", "mavsim.cli", "--scenario", str(scenario), "--seed", str(args.seed),
         "--api-port", str(api_port), "--gcs-port", str(gcs_port), "--api-local-port", str(api_local),
@@ -184,11 +183,32 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
         if value is not None:  # the key itself never appears on a command line
             sim_cmd += [flag, value]
             fly_cmd += [flag, value]
-    # fly first: mavsim's clock starts when it does, and a companion still importing would
-    # find the scenario's obstacles already on their way.
     fly = subprocess.Popen(fly_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _wait_for_listener(api_port, fly, _FLY_START_S)
     _wait_for_listener(obstacle_port, fly, _FLY_START_S)  # opened right after the autopilot link
+    return fly, sim_cmd
+
+
+def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None) -> dict:
+    """mavsim and ``companion fly`` as two processes over loopback UDP; every wait is bounded.
+
+    ``fly`` gets ``--duration`` (the scenario's duration plus 30 s) so it ends by itself;
+    should it not, it is stopped after another 60 s and the summary says so.
+    """
+    from companion.loop.config import load_scenario
+
+    fly_duration_s = load_scenario(scenario).duration_s / max(args.speed, 1e-3) + 30.0
+    for attempt in range(1, _PORT_ATTEMPTS + 1):
+        ports = [_free_udp_port() for _ in range(6)]
+        fly, sim_cmd = _start_fly(scenario, args, overrides, out, ports, fly_duration_s)
+        if fly.poll() is None:
+            break
+        # fly ended before it listened: a port picked as free was taken before fly bound it
+        # (the pick and the bind are separate moments), or fly refused its arguments.
+        _, err = fly.communicate()
+        if "Address already in use" not in err or attempt == _PORT_ATTEMPTS:
+            return {"mode": "realtime", "fly_error": err[-2000:]}
+    api_port, gcs_port, api_local, gcs_local, obstacle_port, obstacle_local = ports
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     crowd = None
     fly_error = None

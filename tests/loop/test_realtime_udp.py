@@ -40,3 +40,24 @@ def test_that_offboard_is_engaged_and_the_goal_reached_over_udp_and_the_log_repl
     assert res.unmatched_commands == 0 and res.tick_mismatches == 0
     assert res.max_abs_diff_mps == 0.0
     assert len(res.companion.records) == summary["replans"]
+
+
+def test_that_a_port_taken_between_its_pick_and_flys_bind_gets_fresh_ports_not_a_failed_run(capsys, monkeypatch):
+    """The pick of a free port and fly's bind are separate moments (a clean-clone run once lost one)."""
+    import socket
+
+    from companion.commands import demo
+
+    squatter = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    squatter.bind(("127.0.0.1", 0))
+    taken = squatter.getsockname()[1]
+    picks = iter([taken])  # the first pick, the autopilot port, is already someone else's
+    real_pick = demo._free_udp_port
+    monkeypatch.setattr(demo, "_free_udp_port", lambda: next(picks, None) or real_pick())
+    try:
+        assert main(["demo", SCENARIO, "--realtime", "--json"]) == 0
+    finally:
+        squatter.close()
+    summary = json.loads(capsys.readouterr().out)
+    assert "fly_error" not in summary, summary["fly_error"]
+    assert summary["goal_reached"] is True and summary["phase"] == "HELD"
