@@ -5,9 +5,10 @@ systems report ODOMETRY at 1 Hz from 6-10 m beside the route to the companion's 
 port. The setpoint stream must hold 20 Hz with no gap over 150 ms, OFFBOARD must hold
 until the goal, nothing may collide, and the crowd must really be tracked. 60-100 s of wall
 time per scene. Antipodal is marked realtime (``make realtime-test``, run by CI). Corridor is
-marked ``crowd`` (``make crowd-test``, not run by CI) because it does not hold yet: on the quiet
-2-core machine the corridor run collided (true clearance -0.18 m) while plans failed with 200
-tracks in range (issue 14 stays open on it; docs/REALTIME.md gives the measured runs).
+marked ``crowd`` (``make crowd-test``, not run by CI) because it does not hold yet: the crowd
+now stands beyond the corridor's walls and costs the planner nothing, and the stream holds,
+but in one of two quiet runs the corridor's ``c_max`` flight touched its leader (true clearance
+-0.08 m; issue 14 stays open on it; docs/REALTIME.md gives the measured runs).
 
 Run: ``make realtime-test`` and ``make crowd-test``
 """
