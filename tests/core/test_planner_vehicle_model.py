@@ -1,7 +1,8 @@
 """The planner's first-order velocity-lag model against a fine-step simulation of the lag.
 
 The simulation integrates ``dv/dt = (u - v) / T`` with the command held over each step,
-as mavsim's vehicle does; the model's closed forms must give the same step-end
+as mavsim's vehicle does, exactly over each of its fine steps (a trapezoid rule for the
+position was 1.1e-6 m off after six 1 s steps with T = 0.055 s: a CI run's counterexample); the model's closed forms must give the same step-end
 velocities and positions, and the planner's plans must obey them.
 """
 
@@ -9,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from companion.errors import ConfigError
@@ -24,9 +25,9 @@ def _simulate(p0, v0, commands, step_s, time_constant_s, substeps=2000):
     p, v = np.array(p0, dtype=float), np.array(v0, dtype=float)
     positions, velocities = [], []
     for u in commands:
-        for _ in range(substeps):       # exact over dt for v; trapezoid for p
+        for _ in range(substeps):       # exact over dt for v and for p (the integral of v over dt)
             v_next = u + (v - u) * decay
-            p = p + 0.5 * dt * (v + v_next)
+            p = p + u * dt + (v - u) * time_constant_s * (1.0 - decay)
             v = v_next
         positions.append(p.copy())
         velocities.append(v.copy())
@@ -43,6 +44,7 @@ def test_that_without_lag_the_model_is_the_papers():
 
 @settings(max_examples=25, deadline=None)
 @given(step_s=st.floats(0.05, 1.0), time_constant_s=st.floats(0.05, 1.0), seed=st.integers(0, 2**31 - 1))
+@example(step_s=1.0, time_constant_s=0.0546875, seed=1073741824)  # failed with the trapezoid reference
 def test_that_the_commands_make_a_lagging_vehicle_fly_the_planned_velocities_and_positions(step_s, time_constant_s, seed):
     rng = np.random.default_rng(seed)
     lag = LagModel.from_time_constant(step_s, time_constant_s)
