@@ -39,7 +39,11 @@ def _check_flight(summary: dict, n_sources: int) -> None:
     assert any("ENGAGED" in text for _, text in summary.get("events", [])), summary.get("events") or summary.get("fly_error")
     assert summary["collided"] is False and summary["goal_reached"] is True, summary
     intake = summary["obstacle_intake"]
-    assert len(intake["accepted"]) == n_sources and min(intake["accepted"].values()) > 50, intake
+    # (a clean-clone CI run once saw 107, 40 and 26 reports accepted where runs here accept about
+    # 160 per aircraft, cause not found: the context below is printed to find it next time)
+    context = {k: summary.get(k) for k in ("time_to_goal_s", "sim_time_s", "inbound_superseded", "inbound_dropped",
+                                           "setpoint_gap_max_ms", "tick_max_ms", "stream_nice", "tracks", "wall_s")}
+    assert len(intake["accepted"]) == n_sources and min(intake["accepted"].values()) > 50, (intake, context)
     assert intake["clock_restarts"] == {}, intake
 
 
