@@ -208,7 +208,7 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
         _, err = fly.communicate()
         if "Address already in use" not in err or attempt == _PORT_ATTEMPTS:
             return {"mode": "realtime", "fly_error": err[-2000:]}
-    api_port, gcs_port, api_local, gcs_local, obstacle_port, obstacle_local = ports
+    gcs_port, obstacle_port = ports[1], ports[4]  # the order _start_fly unpacks
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     crowd = None
     fly_error = None
