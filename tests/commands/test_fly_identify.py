@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 import threading
 
 import pytest
@@ -12,12 +11,7 @@ from companion.offline.identify import identify, load_response_log
 from mavsim.core import Simulator
 from mavsim.scenario import scenario_from_dict
 from mavsim.udp import LinkAddress, UdpServer
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from tests.support.ports import free_udp_port
 
 
 def _run(capsys, argv: list[str]) -> tuple[int, str, str]:
@@ -40,7 +34,7 @@ def test_that_a_missing_argument_is_one_line(capsys, argv, needle):
 
 def test_that_no_autopilot_is_one_line_after_the_bounded_wait(capsys, tmp_path, monkeypatch):
     monkeypatch.setattr("companion.commands.fly_identify.HEARTBEAT_WAIT_S", 0.5)
-    port = _free_port()
+    port = free_udp_port()
     code, _, err = _run(capsys, ["fly", "--identify", "--connect", f"udpin:127.0.0.1:{port}",
                                  "--tlog", str(tmp_path / "s.tlog")])
     assert code == 2 and "no autopilot HEARTBEAT" in err and err.count("\n") == 1
@@ -48,7 +42,7 @@ def test_that_no_autopilot_is_one_line_after_the_bounded_wait(capsys, tmp_path, 
 
 @pytest.mark.realtime
 def test_that_the_identification_flight_against_the_px4_profile_identifies_its_two_part_response(capsys, tmp_path):
-    api = _free_port()
+    api = free_udp_port()
     sim = Simulator(scenario_from_dict({"vehicle": {"start_ned_m": [0.0, 0.0, 0.0]}, "sim": {"vehicle": "px4"}}),
                     seed=3, links=("api",))
     server = UdpServer(sim, [LinkAddress("api", 0, api)], speed=1.0)

@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import json
 import socket
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -25,20 +23,12 @@ from pathlib import Path
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.mavlink.tlog import read_tlog
-from mavsim.core import Simulator
-from mavsim.scenario import load_scenario
-from mavsim.udp import LinkAddress, UdpServer
+from tests.support.fly_udp import fly_beside_mavsim, streamed_setpoints
+from tests.support.ports import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "tests" / "data" / "short_hop.toml"
 NON_FINITE = (np.nan, np.inf, -np.inf)
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def hostile_datagrams(rng: np.random.Generator, seq: list[int]) -> list[bytes]:
@@ -67,17 +57,7 @@ def hostile_datagrams(rng: np.random.Generator, seq: list[int]) -> list[bytes]:
 
 
 def test_that_companion_fly_survives_garbage_and_absurd_obstacles_over_udp(tmp_path):
-    port, obstacle_port = free_udp_port(), free_udp_port()
-    sim = Simulator(load_scenario(SCENARIO), seed=0)
-    # the scenario's obstacle reports on its own link (transport = "link"), the attack on the autopilot's
-    server = UdpServer(sim, [LinkAddress("api", 0, port), LinkAddress("obstacles", 0, obstacle_port)], speed=1.0)
-    serve = threading.Thread(target=server.run, args=(60.0,), daemon=True)
-    tlog = tmp_path / "fly.tlog"
-    fly = subprocess.Popen(
-        [sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{port}", "--scenario", str(SCENARIO),
-         "--obstacles", f"udpin:127.0.0.1:{obstacle_port}",
-         "--duration", "25", "--exit-after-goal", "1.0", "--tlog", str(tlog), "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    port = free_udp_port()
     stop = threading.Event()
     sent = [0]
 
@@ -91,20 +71,15 @@ def test_that_companion_fly_survives_garbage_and_absurd_obstacles_over_udp(tmp_p
                 time.sleep(0.02)  # about 200 hostile datagrams per second
 
     attacker = threading.Thread(target=attack, daemon=True)
-    time.sleep(0.5)  # the companion's socket is bound before mavsim sends
-    serve.start()
-    attacker.start()
-    try:
-        out, err = fly.communicate(timeout=120)
-    finally:
+
+    def stop_attack() -> None:
         stop.set()
-        if fly.poll() is None:
-            fly.kill()
-            fly.communicate()
-        server.stop()
-        serve.join(timeout=5)
         attacker.join(timeout=5)
-        server.close()
+
+    # the scenario's obstacle reports on their own link (transport = "link"), the attack on the autopilot's
+    run = fly_beside_mavsim(SCENARIO, tmp_path, autopilot_port=port, duration_s=25,
+                            start_sender=attacker.start, stop_sender=stop_attack)
+    out, err, sim = run.out, run.err, run.sim
     assert "Traceback" not in err, err[-3000:]
     report = json.loads(out)
     assert sent[0] > 1000
@@ -114,11 +89,8 @@ def test_that_companion_fly_survives_garbage_and_absurd_obstacles_over_udp(tmp_p
     assert report["tracks"] <= 1                               # ...so only the scenario's obstacle is tracked
     assert not sim.recorder.summary()["collided"]
     # every setpoint streamed is finite, and the stream held its rate
-    setpoints = [(t, m) for t, m in read_tlog(tlog)
-                 if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.get_srcComponent() == 191]
-    v = np.array([[m.vx, m.vy, m.vz] for _, m in setpoints])
-    assert len(setpoints) > 100 and np.all(np.isfinite(v)) and np.abs(v).max() <= 3.0 + 1e-6
-    t = np.array([t for t, _ in setpoints])
+    t, v = streamed_setpoints(run.tlog)
+    assert len(t) > 100 and np.all(np.isfinite(v)) and np.abs(v).max() <= 3.0 + 1e-6
     gaps = np.diff(t)
     assert len(t) / (t[-1] - t[0]) >= 15.0, f"stream rate {len(t) / (t[-1] - t[0]):.1f} Hz"
     assert gaps.max() < 0.5, f"largest setpoint gap {gaps.max():.3f} s"

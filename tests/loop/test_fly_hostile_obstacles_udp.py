@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import json
 import socket
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -23,21 +21,13 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.mavlink.tlog import read_tlog
-from mavsim.core import Simulator
-from mavsim.scenario import load_scenario
-from mavsim.udp import LinkAddress, UdpServer
+from tests.support.fly_udp import fly_beside_mavsim, streamed_setpoints
+from tests.support.ports import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "tests" / "data" / "short_hop.toml"
 RING_IDS = range(150, 250)  # 100 systems
 HUGE, NAN, INF = 1e30, float("nan"), float("inf")
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _cov(var: float) -> list[float]:
@@ -95,31 +85,17 @@ class HostileSender:
 
 @pytest.mark.realtime
 def test_that_hostile_obstacle_reports_neither_crash_fly_nor_slow_its_stream(tmp_path):
-    port, obstacle_port, sim_obstacle_port = free_udp_port(), free_udp_port(), free_udp_port()
-    sim = Simulator(load_scenario(SCENARIO), seed=0)
-    server = UdpServer(sim, [LinkAddress("api", 0, port), LinkAddress("obstacles", 0, sim_obstacle_port)], speed=1.0)
-    serve = threading.Thread(target=server.run, args=(60.0,), daemon=True)
-    tlog = tmp_path / "fly.tlog"
-    fly = subprocess.Popen(
-        [sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{port}", "--scenario", str(SCENARIO),
-         "--obstacles", f"udpin:127.0.0.1:{sim_obstacle_port}", "--obstacles", f"udpin:127.0.0.1:{obstacle_port}",
-         "--duration", "30", "--exit-after-goal", "1.0", "--tlog", str(tlog), "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    obstacle_port = free_udp_port()
     hostile = HostileSender(obstacle_port)
-    time.sleep(0.5)  # the companion's sockets are bound before mavsim sends
-    serve.start()
-    hostile.thread.start()
-    try:
-        out, err = fly.communicate(timeout=120)
-    finally:
+
+    def stop_hostile() -> None:
         hostile.stop.set()
-        if fly.poll() is None:
-            fly.kill()
-            fly.communicate()
-        server.stop()
-        serve.join(timeout=5)
         hostile.thread.join(timeout=5)
-        server.close()
+
+    run = fly_beside_mavsim(SCENARIO, tmp_path, autopilot_port=free_udp_port(), duration_s=30,
+                            extra_obstacle_ports=(obstacle_port,), start_sender=hostile.thread.start,
+                            stop_sender=stop_hostile)
+    out, err, sim = run.out, run.err, run.sim
     assert "Traceback" not in err, err[-3000:]
     report = json.loads(out)
     assert hostile.sent > 5000
@@ -141,11 +117,8 @@ def test_that_hostile_obstacle_reports_neither_crash_fly_nor_slow_its_stream(tmp
     assert refused(143, "") + sum(n for k, n in restarts.items() if k.endswith(" sys 143")) >= 3, (rejected, restarts)
     assert report["tracks"] >= 100 and report["tracks_unconstrained_max"] > 0  # the ring: tracked, K constrained
     # every setpoint finite and bounded; the stream held its rate
-    setpoints = [(t, m) for t, m in read_tlog(tlog)
-                 if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.get_srcComponent() == 191]
-    v = np.array([[m.vx, m.vy, m.vz] for _, m in setpoints])
-    assert len(setpoints) > 100 and np.all(np.isfinite(v)) and np.abs(v).max() <= 2.0 + 1e-6
-    t = np.array([t for t, _ in setpoints])
+    t, v = streamed_setpoints(run.tlog)
+    assert len(t) > 100 and np.all(np.isfinite(v)) and np.abs(v).max() <= 2.0 + 1e-6
     rate = (len(t) - 1) / (t[-1] - t[0])
     assert rate >= 19.0, f"stream rate {rate:.2f} Hz"
     # (no gap near PX4's 1.3 s offboard loss; the 150 ms must-show is tests/loop/test_realtime_crowd.py)

@@ -17,15 +17,10 @@ from companion.loop.config import load_scenario
 from companion.loop.realtime import run_realtime
 from companion.mavlink.link import open_link
 from companion.offline.replay_stand_ins import signatures_rejected
+from tests.support.ports import free_udp_port
 
 SCENARIO = "tests/data/short_hop.toml"
 KEY = bytes(range(32))
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def test_that_rejections_are_announced_with_their_count_at_most_every_five_seconds():
@@ -41,7 +36,7 @@ def test_that_rejections_are_announced_with_their_count_at_most_every_five_secon
 
 
 def test_that_a_signed_link_counts_and_announces_unsigned_packets_over_udp():
-    port = _free_port()
+    port = free_udp_port()
     companion = Companion(load_scenario(SCENARIO))
     link = open_link(f"udpin:127.0.0.1:{port}", signing_key=KEY)
     stranger = mavlink2.MAVLink(None, 42, 1)  # unsigned

@@ -25,6 +25,7 @@ from companion.cli import main
 from companion.loop.config import load_scenario
 from companion.offline.replay import replay
 from tests.support.traffic_scenarios import antipodal_variant
+from tests.support.ports import free_udp_port
 
 SHORT_HOP = Path(__file__).resolve().parents[1] / "data" / "short_hop.toml"
 
@@ -70,12 +71,6 @@ def test_that_adsb_through_the_autopilot_and_remote_id_are_flown_safely_in_real_
     assert summary["obstacle_intake"]["origin"] is not None  # GPS_GLOBAL_ORIGIN requested and answered
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 class _RogueSource:
     """A MAVLink system sending ``make()`` at 10 Hz to ``port`` and counting every byte sent back to it."""
 
@@ -103,7 +98,7 @@ class _RogueSource:
 
 
 def test_that_every_packet_the_companion_sends_goes_to_the_autopilot_and_none_to_an_obstacle_source(tmp_path):
-    api, gcs, api_local, gcs_local, obs, obs_local = (_free_port() for _ in range(6))
+    api, gcs, api_local, gcs_local, obs, obs_local = (free_udp_port() for _ in range(6))
     sim = subprocess.Popen(
         [sys.executable, "-m", "mavsim.cli", "--scenario", str(SHORT_HOP), "--api-port", str(api), "--gcs-port", str(gcs),
          "--api-local-port", str(api_local), "--gcs-local-port", str(gcs_local), "--obstacle-port", str(obs),

@@ -11,12 +11,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.errors import LinkError
 from companion.mavlink import messages
 from companion.mavlink.link import MemoryLink, open_link
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from tests.support.ports import free_udp_port
 
 
 def _peer(sysid: int, compid: int) -> tuple[socket.socket, mavlink2.MAVLink]:
@@ -59,7 +54,7 @@ def test_that_an_obstacle_link_is_receive_only_and_tags_what_it_receives():
 
 
 def test_that_a_udpin_link_sends_only_to_the_autopilots_address_never_to_every_address_it_heard():
-    port = _free_port()
+    port = free_udp_port()
     link = open_link(f"udpin:127.0.0.1:{port}", clock=time.time)
     autopilot, ap_mav = _peer(1, 1)
     rogue, rogue_mav = _peer(150, 197)
@@ -86,7 +81,7 @@ def test_that_a_udpin_link_sends_only_to_the_autopilots_address_never_to_every_a
 def test_that_before_the_autopilot_is_known_a_udpin_link_sends_to_nobody_and_counts_it():
     """A rogue heard first must not get the companion's HEARTBEATs (a clean-clone CI run caught
     three going to an obstacle source on the autopilot port before PX4 was heard)."""
-    port = _free_port()
+    port = free_udp_port()
     link = open_link(f"udpin:127.0.0.1:{port}", clock=time.time)
     rogue, rogue_mav = _peer(150, 197)
     autopilot, ap_mav = _peer(1, 1)

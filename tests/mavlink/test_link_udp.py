@@ -1,6 +1,5 @@
 """MavutilLink over loopback UDP (free ports, bounded waits, closed afterwards)."""
 
-import socket
 import time
 
 import pytest
@@ -8,12 +7,7 @@ import pytest
 from companion.mavlink import messages as M
 from companion.errors import LinkError
 from companion.mavlink.link import MavutilLink, open_link
-
-
-def free_udp_port():
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from tests.support.ports import free_udp_port
 
 
 def poll_until(link, predicate, timeout_s=3.0):
