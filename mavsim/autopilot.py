@@ -7,7 +7,8 @@ REQUEST_MESSAGE 512, REQUEST_AUTOPILOT_CAPABILITIES 520, SET_MESSAGE_INTERVAL 51
 GET_MESSAGE_INTERVAL 510; every other command is answered ACK 3 UNSUPPORTED),
 SET_MODE, SET_POSITION_TARGET_LOCAL_NED, PARAM_REQUEST_LIST / PARAM_REQUEST_READ /
 PARAM_SET, MISSION_REQUEST_LIST (MISSION_COUNT 0), MISSION_COUNT / MISSION_CLEAR_ALL
-(MISSION_ACK), PING, TIMESYNC. Messages addressed to another system or component are
+(MISSION_ACK), PING, TIMESYNC (answered; answers to its own requests are counted in
+``stats["timesync_answers"]``). Messages addressed to another system or component are
 ignored; anything else is counted and ignored. Replies go to the link the request
 came on; STATUSTEXT to every link.
 """
@@ -284,7 +285,8 @@ class Autopilot:
         return [mavlink2.MAVLink_ping_message(msg.time_usec, msg.seq, msg.get_srcSystem(), msg.get_srcComponent())]
 
     def _on_timesync(self, msg, now_us, veh, estimate):
-        if msg.tc1 != 0:
+        if msg.tc1 != 0:  # an answer to one of our 10 Hz requests (TIMESYNC stream): counted
+            self.stats["timesync_answers"] += 1
             return []
         return [mavlink2.MAVLink_timesync_message(now_us * 1000, msg.ts1)]
 

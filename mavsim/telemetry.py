@@ -35,11 +35,13 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "GLOBAL_POSITION_INT": 50.0,
     "HOME_POSITION": 0.5,
     "GPS_RAW_INT": 0.0,  # off unless set or requested (MAV_CMD_REQUEST_MESSAGE 24)
+    "TIMESYNC": 10.0,  # requests (tc1 0, ts1 the boot clock in ns), as PX4 sends them on its links
 }
 #: Stream name -> MAVLink message id.
 STREAM_IDS: dict[str, int] = {
     "HEARTBEAT": 0, "SYS_STATUS": 1, "ATTITUDE": 30, "LOCAL_POSITION_NED": 32, "GLOBAL_POSITION_INT": 33,
     "HOME_POSITION": 242, "EXTENDED_SYS_STATE": 245, "ODOMETRY": 331, "GPS_RAW_INT": 24,
+    "TIMESYNC": 111,
 }
 MSG_AUTOPILOT_VERSION = 148
 
@@ -160,6 +162,8 @@ class TelemetryBuilder:
             lat, lon, alt = self.global_from_local(np.zeros(3))
             return mavlink2.MAVLink_home_position_message(lat, lon, alt, 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
                                                           0.0, 0.0, 0.0, now_us)
+        if msg_id == 111:
+            return mavlink2.MAVLink_timesync_message(0, now_us * 1000)
         if msg_id == MSG_AUTOPILOT_VERSION:
             # flight_sw_version 1.15.0 official (0xFF type byte)
             return mavlink2.MAVLink_autopilot_version_message(

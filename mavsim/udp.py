@@ -15,7 +15,8 @@ companion's obstacle port; ADSB re-streamed on the vehicle links; or the API lin
 
 Simulated time runs ``speed`` times faster than the wall clock; the simulator is
 advanced to ``elapsed_wall * speed`` every tick (about one physics step of wall
-time, at least 2 ms) and whenever a datagram arrives.
+time, at least 2 ms) and, before they are handled, whenever datagrams arrive, so a
+command acts and a TIMESYNC request is answered at the time it came in.
 """
 
 from __future__ import annotations
@@ -135,6 +136,12 @@ class UdpServer:
             if end_us is not None and self.sim.now_us >= end_us:
                 break
             readable, _, _ = select.select(list(socks), [], [], self._tick_s)
+            if readable:  # handle what arrived at the time it arrived (a TIMESYNC answer carries it)
+                target = sim0 + round((time.monotonic() - t0) * self.speed * 1e6)
+                if end_us is not None:
+                    target = min(target, end_us)
+                if target > self.sim.now_us:
+                    self._send(self.sim.advance_to(target))
             for sock in readable:
                 name = socks[sock]
                 for _ in range(64):  # drain what is queued, bounded

@@ -31,6 +31,7 @@ from companion.loop.perception import Perception, PoseOutcome
 from companion.loop.planning import InlinePlanning, PlanningService, PlanResult
 from companion.loop.records import CompanionState, LoopMode, PlanStatus, ReplanRecord
 from companion.loop.request_builder import RequestBuilder
+from companion.loop.vehicle_clock import link_ns
 from companion.mavlink import messages
 from companion.mavlink.link import Received
 from companion.mavlink.offboard import Notify, OffboardConfig, OffboardSequencer, SendCommand
@@ -50,6 +51,9 @@ _SIGNATURE_WARN_PERIOD_S = 5.0  # as mavsim's
 SIGNATURE_TEXT = "companion: bad or no signature ("
 
 Outbox = list[mavlink2.MAVLink_message]
+
+#: STATUSTEXT when the autopilot's TIMESYNC answers disagree with its pose stamps (<= 50 characters).
+CLOCK_DISAGREES_TEXT = "companion: TIMESYNC off pose clock, using arrivals"
 
 #: NAMED_VALUE_FLOAT sent at the tick a plan arrives when that is later than its request
 #: (real time): the value is the replan's number, so a replay applies it at the same tick.
@@ -106,6 +110,8 @@ class Companion:
         self._signatures_rejected = 0
         self._signatures_announced = 0
         self._last_signature_warn = -math.inf
+        self._last_timesync_t: float | None = None
+        self._clock_warning = False
 
     @property
     def planner(self) -> Planner:
@@ -133,16 +139,23 @@ class Companion:
 
     # ------------------------------------------------------------------ inbound
 
-    def handle(self, rx: Received) -> None:
-        """Take one inbound message (never raises for bad content: it is logged and counted)."""
+    def handle(self, rx: Received) -> Outbox:
+        """Take one inbound message; return what must answer it at once (never raises for bad content).
+
+        The answer is the autopilot's TIMESYNC request answered (PX4 asks at 10 Hz and uses
+        only answers back within 10 ms, so it cannot wait for the next tick); the edge
+        sends it to the autopilot as soon as this returns. Bad content is logged and counted.
+        """
         if self.obstacles.claims(rx, self.autopilot):  # obstacle links, traffic, GPS_GLOBAL_ORIGIN
-            return
+            return []
         decoded = messages.decode(rx.msg)
         if decoded is None:
-            return
+            return []
         if isinstance(decoded, messages.Rejected):
             self.state.messages_rejected += 1
-            if self.autopilot is not None and decoded.key == self.autopilot:
+            if decoded.msg_type == "TIMESYNC":
+                pass  # a clock message, not an estimate: counted, no filter involved
+            elif self.autopilot is not None and decoded.key == self.autopilot:
                 self.state.drone_rejections += 1
             else:
                 self.state.obstacle_rejections += 1
@@ -158,13 +171,27 @@ class Companion:
             elif outcome is PoseOutcome.OBSTACLE_REJECTED:
                 self.state.obstacle_rejections += 1
         elif decoded.key != self.autopilot:
-            return  # acknowledgements, texts and home positions count only from the autopilot
+            return []  # acknowledgements, texts, clocks and home positions count only from the autopilot
+        elif isinstance(decoded, messages.TimeSync):
+            return self._on_timesync(rx.t_s, decoded)
         elif isinstance(decoded, messages.CommandAck):
             self.sequencer.on_ack(rx.t_s, decoded)
         elif isinstance(decoded, messages.StatusText):
             self.sequencer.on_statustext(rx.t_s, decoded.text)
         elif isinstance(decoded, messages.HomePosition):
             self.sequencer.on_home_altitude(decoded.altitude_amsl_m)
+        return []
+
+    def _on_timesync(self, t_rx: float, sync: messages.TimeSync) -> Outbox:
+        """Answer the autopilot's TIMESYNC request, or take its answer to ours as a clock sample."""
+        if sync.is_request:
+            return [messages.timesync(max(1, link_ns(t_rx)), sync.ts1_ns)]  # tc1 0 would read as a request
+        clock = self.perception.clock
+        was_disagreeing = clock.disagrees
+        clock.answer(t_rx, sync.tc1_ns, sync.ts1_ns)
+        if clock.disagrees and not was_disagreeing:
+            self._clock_warning = True  # said at the next tick
+        return []
 
     def on_signatures_rejected(self, total: int) -> None:
         """The links' running count of packets dropped for a bad or missing signature.
@@ -192,6 +219,7 @@ class Companion:
                 and t_s - self._last_signature_warn >= _SIGNATURE_WARN_PERIOD_S:
             self._signatures_announced, self._last_signature_warn = self._signatures_rejected, t_s
             out.append(self._say(t_s, SEV_WARNING, f"{SIGNATURE_TEXT}{self._signatures_rejected} rejected)"))
+        out.extend(self._clock_messages(t_s))
         requests, texts = self.obstacles.outbound(t_s, self.autopilot)
         out.extend(requests)
         out.extend(self._say(t_s, severity, text) for severity, text in texts)
@@ -219,6 +247,20 @@ class Companion:
             out.append(messages.position_velocity_setpoint(t_boot_ms, *reference, **target))
         else:
             out.append(messages.velocity_setpoint(t_boot_ms, command, **target))
+        return out
+
+    def _clock_messages(self, t_s: float) -> Outbox:
+        """This tick's TIMESYNC request to the autopilot (every ``1 / timesync_hz`` s), and the
+        warning that its TIMESYNC clock is not the one that stamps its poses."""
+        out: Outbox = []
+        if self._clock_warning:
+            self._clock_warning = False
+            out.append(self._say(t_s, SEV_WARNING, CLOCK_DISAGREES_TEXT))
+        rate = self.loop.timesync_hz
+        if rate > 0.0 and self.autopilot is not None and (
+                self._last_timesync_t is None or t_s - self._last_timesync_t >= 1.0 / rate - 1e-9):
+            self._last_timesync_t = t_s
+            out.append(messages.timesync(0, self.perception.clock.request(t_s)))
         return out
 
     def _say(self, t_s: float, severity: int, text: str) -> mavlink2.MAVLink_statustext_message:

@@ -149,6 +149,8 @@ class LoopConfig:
     max_plan_age_s : link seconds after its request past which a plan is no longer flown
         (the stream brakes within the acceleration bound until a newer plan arrives), in (0, 10].
 
+    timesync_hz : rate of the TIMESYNC requests that measure the autopilot's clock, Hz, in [0, 50];
+        0 maps it from pose arrival times only (:mod:`companion.loop.vehicle_clock`).
     setpoint_kind : ``"velocity"`` (default) streams the plan's velocity commands;
         ``"position_velocity"`` streams the plan's position with its velocity as feed-forward
         while tracking a plan (PX4's position loop removes the slow tail of its velocity response).
@@ -164,6 +166,7 @@ class LoopConfig:
     max_plan_age_s: float = 1.0
     max_constrained_tracks: int = 8
     setpoint_kind: str = "velocity"
+    timesync_hz: float = 2.0
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -174,6 +177,7 @@ class LoopConfig:
         set_("drone_cov_floor_m2", check.number("drone_cov_floor_m2", self.drone_cov_floor_m2, lo=0.0, hi=100.0))
         check.choice("setpoint_kind", self.setpoint_kind, ("velocity", "position_velocity"))
         set_("max_plan_age_s", check.number("max_plan_age_s", self.max_plan_age_s, positive=True, hi=10.0))
+        set_("timesync_hz", check.number("timesync_hz", self.timesync_hz, lo=0.0, hi=50.0))
         set_("max_constrained_tracks", check.integer("max_constrained_tracks", self.max_constrained_tracks, lo=1, hi=64))
 
 

@@ -2,26 +2,24 @@
 
 Time bases: *link time* (wall clock on a real link, simulated time in lockstep) schedules
 replans and setpoints; *vehicle time* (the autopilot's boot clock, from the messages'
-own stamps) stamps the estimates. The offset between them is the smallest
-``t_rx - t_msg`` of the autopilot's recent accepted pose messages (latency only adds to it).
+own stamps) stamps the estimates. :class:`~companion.loop.vehicle_clock.VehicleClock`
+joins them: from the autopilot's TIMESYNC answers when it gives them, else from the
+smallest ``t_rx - t_msg`` of its recent accepted pose messages (latency only adds to it).
 """
 
 from __future__ import annotations
 
 import enum
 import logging
-from collections import deque
 
 import numpy as np
 
 from companion.loop.config import CompanionScenario
+from companion.loop.vehicle_clock import VehicleClock
 from companion.mavlink.messages import Key, PoseObservation
 from estimator import DroneFilter, ObstacleTracker
 
 logger = logging.getLogger(__name__)
-
-_OFFSET_WINDOW_S = 2.0  # the vehicle-time offset is the minimum over this much recent link time
-_OFFSET_SAMPLES = 64
 
 
 class PoseOutcome(enum.Enum):
@@ -46,7 +44,8 @@ class Perception:
     def __init__(self, scenario: CompanionScenario) -> None:
         self.drone = DroneFilter(scenario.drone_filter)
         self.tracker = ObstacleTracker(scenario.tracker)
-        self._offsets: deque[tuple[float, float]] = deque(maxlen=_OFFSET_SAMPLES)
+        #: Link time onto the autopilot's clock (pose arrivals, TIMESYNC answers).
+        self.clock = VehicleClock()
         self._uses_odometry = False
         self._ignored_keys: set[Key] = set()
         #: The autopilot's own position covariance from ODOMETRY (m^2, NED), if it reports one.
@@ -69,7 +68,7 @@ class Perception:
             result = self.drone.update(obs.t_s, obs.position_ned, obs.velocity_ned, obs.position_var, obs.velocity_var)
             if not result.accepted:
                 return PoseOutcome.DRONE_REJECTED
-            self._offsets.append((t_rx, t_rx - obs.t_s))
+            self.clock.observe_pose(t_rx, obs.t_s)
             if obs.position_cov is not None:
                 self.reported_cov = obs.position_cov
             return PoseOutcome.DRONE
@@ -83,5 +82,4 @@ class Perception:
 
     def vehicle_time(self, t_s: float) -> float | None:
         """Vehicle time (s since its boot) corresponding to link time ``t_s``; None before any pose."""
-        recent = [off for t, off in self._offsets if t >= t_s - _OFFSET_WINDOW_S] or [off for _, off in self._offsets]
-        return None if not recent else t_s - min(recent)
+        return self.clock.vehicle_time(t_s)

@@ -368,10 +368,16 @@ def run_realtime(
     marks = TlogMarks(tlog, link.key) if tlog is not None else None
 
     def handle(rx) -> None:
-        companion.handle(rx)
+        answers = companion.handle(rx)
         if tlog is not None:
             marks.received(rx.t_s, rx.link)
             tlog.write(rx.t_s, rx.raw)
+        if answers:
+            link.peer = companion.autopilot
+        for msg in answers:  # TIMESYNC answers: at once, to the autopilot only
+            packet = link.send(msg, t_s=rx.t_s)
+            if tlog is not None:
+                tlog.write(rx.t_s, packet)
 
     start, cpu_start = clock(), time.process_time()
     next_tick = start

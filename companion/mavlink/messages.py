@@ -186,6 +186,20 @@ class HomePosition:
 
 
 @dataclass(frozen=True)
+class TimeSync:
+    """TIMESYNC: a request when ``tc1_ns`` is 0 (``ts1_ns`` the sender's clock), else an answer
+    (``tc1_ns`` the answerer's clock on receipt, ``ts1_ns`` the request's echoed). Nanoseconds."""
+
+    key: Key
+    tc1_ns: int
+    ts1_ns: int
+
+    @property
+    def is_request(self) -> bool:
+        return self.tc1_ns == 0
+
+
+@dataclass(frozen=True)
 class Rejected:
     """An inbound message that was not trusted; ``reason`` says why."""
 
@@ -194,7 +208,7 @@ class Rejected:
     reason: str
 
 
-Decoded = Union[VehicleHeartbeat, PoseObservation, CommandAck, StatusText, HomePosition, Rejected]
+Decoded = Union[VehicleHeartbeat, PoseObservation, CommandAck, StatusText, HomePosition, TimeSync, Rejected]
 
 
 # --------------------------------------------------------------------------- decoding
@@ -254,6 +268,13 @@ def decode_statustext(msg: mavlink2.MAVLink_statustext_message) -> StatusText:
     """STATUSTEXT to :class:`StatusText` (one chunk; text stripped of NULs)."""
     text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode("ascii", "replace")
     return StatusText(key=source_key(msg), severity=int(msg.severity), text=text.rstrip("\x00"))
+
+
+def decode_timesync(msg: mavlink2.MAVLink_timesync_message) -> TimeSync | Rejected:
+    tc1, ts1 = int(msg.tc1), int(msg.ts1)
+    if tc1 < 0 or ts1 < 0:
+        return _reject(msg, f"TIMESYNC with tc1 {tc1} and ts1 {ts1}: clocks are non-negative nanoseconds")
+    return TimeSync(source_key(msg), tc1, ts1)
 
 
 def decode_home_position(msg: mavlink2.MAVLink_home_position_message) -> HomePosition:
@@ -400,6 +421,7 @@ _DECODERS = {
     "COMMAND_ACK": decode_command_ack,
     "STATUSTEXT": decode_statustext,
     "HOME_POSITION": decode_home_position,
+    "TIMESYNC": decode_timesync,
 }
 
 
@@ -511,6 +533,12 @@ def statustext(severity: int, text: str) -> mavlink2.MAVLink_statustext_message:
     if len(str(text)) > STATUSTEXT_MAX_CHARS:
         logger.debug("STATUSTEXT truncated to %d characters: %r", STATUSTEXT_MAX_CHARS, text)
     return mavlink2.MAVLink_statustext_message(severity, raw, 0, 0)
+
+
+def timesync(tc1_ns: int, ts1_ns: int) -> mavlink2.MAVLink_timesync_message:
+    """TIMESYNC: a request (``tc1_ns`` 0, ``ts1_ns`` our clock) or an answer (``tc1_ns`` our clock on
+    receipt, ``ts1_ns`` the request's, echoed). Nanoseconds, int64."""
+    return mavlink2.MAVLink_timesync_message(int(tc1_ns), int(ts1_ns))
 
 
 def named_value_float(t_boot_ms: int, name: str, value: float) -> mavlink2.MAVLink_named_value_float_message:

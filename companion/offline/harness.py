@@ -131,7 +131,8 @@ def run_lockstep(
                 for packet in inject(sim.time_s):
                     link.deliver(sim.time_s, packet)
             for rx in link.poll():
-                companion.handle(rx)
+                for msg in companion.handle(rx):  # TIMESYNC answers
+                    link.send(msg)
             if obstacle_link is not None:
                 for t_pkt, packet in sim.take_obstacle_packets():
                     if lost(t_pkt, "to_companion", packet):
@@ -139,7 +140,7 @@ def run_lockstep(
                         continue
                     obstacle_link.deliver(t_pkt, packet)
                 for rx in obstacle_link.poll():
-                    companion.handle(rx)
+                    companion.handle(rx)  # obstacle links are receive-only: nothing is answered there
             n_records = len(companion.records)
             for msg in companion.tick(sim.time_s):
                 link.send(msg)

@@ -329,6 +329,9 @@ def replay(
             else:
                 next_link = link_name(mark[1])
             continue
+        if out and _is_clock_answer(rec.msg):
+            n_out += 1
+            continue  # answered inside handle (not at a tick) from the inbound request: the replay answers it too
         if not out:
             rec.link, next_link = next_link, None
         n_out += out
@@ -445,6 +448,11 @@ def replay(
         path, mode, result.messages, ticks, result.replans, result.commands_compared, max_diff,
     )
     return result
+
+
+def _is_clock_answer(msg) -> bool:
+    """The companion's answer to the autopilot's TIMESYNC request (sent on receipt, not by a tick)."""
+    return msg.get_type() == "TIMESYNC" and int(msg.tc1) != 0
 
 
 def _marked_schedule(stream: list) -> list:

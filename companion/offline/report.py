@@ -48,6 +48,7 @@ def companion_report(companion: Companion) -> dict:
         "obstacle_reports_rejected": state.obstacle_rejections + companion.obstacles.summary()["rejected_total"],
         "tracks": len(companion.tracker),
         "obstacle_intake": companion.obstacles.summary(),
+        "vehicle_clock": companion.perception.clock.summary(),
         "failsafe_events": [(round(t, 2), text) for t, text in state.events if any(w in text for w in _FAILSAFE_WORDS)],
         "events": [(round(t, 2), text) for t, text in state.events],
     }
@@ -114,6 +115,9 @@ def format_report(report: dict) -> str:
     ]
     width = max(len(label) for _, label in order)
     lines = [f"{label.ljust(width)}  {_fmt(report.get(key))}" for key, label in order if key in report]
+    clock = report.get("vehicle_clock")
+    if clock:
+        lines.append(f"{'autopilot clock from'.ljust(width)}  {_clock_line(clock)}")
     intake = report.get("obstacle_intake")
     if intake:  # every rejected obstacle report, per source and reason (a silent drop is a defect)
         lines.append(f"{'obstacle reports accepted'.ljust(width)}  {sum(intake['accepted'].values())} from {len(intake['accepted'])} sources")
@@ -125,3 +129,13 @@ def format_report(report: dict) -> str:
     for t, text in fs:
         lines.append(f"  t={t:7.2f} s  {text}")
     return "\n".join(lines)
+
+
+def _clock_line(clock: dict) -> str:
+    """How link time was mapped onto the autopilot's clock, in one line."""
+    if clock["source"] != "timesync":
+        why = "; TIMESYNC disagreed with the pose stamps" if clock["timesync_disagrees"] else \
+            f"; {clock['timesync_answers']} TIMESYNC answers of {clock['timesync_requests']} requests"
+        return f"{clock['source']}{why}"
+    return (f"timesync (shortest round trip {_fmt(clock['rtt_min_ms'])} ms, drift {_fmt(clock['drift'])}, "
+            f"arrival bound {_fmt(clock['one_way_minus_timesync_ms'])} ms above)")

@@ -14,6 +14,7 @@ import json
 
 from companion.cli import main
 from companion.loop.config import load_scenario
+from companion.mavlink.tlog import read_tlog
 from companion.offline.replay import replay
 
 SCENARIO = "tests/data/short_hop.toml"
@@ -30,6 +31,13 @@ def test_that_offboard_is_engaged_and_the_goal_reached_over_udp_and_the_log_repl
     assert summary["replans"] > 10
     assert summary["setpoints"] > 100 and summary["setpoint_gap_max_ms"] is not None
     assert summary["planner_process"]["solved"] >= summary["replans"]
+    # TIMESYNC both ways: mavsim answered the companion's requests (the answers mapped its clock)
+    # and the companion answered mavsim's 10 Hz requests at once, as PX4 expects
+    clock = summary["vehicle_clock"]
+    assert clock["timesync_answers"] >= 10 and not clock["timesync_disagrees"], clock
+    answered = [m for _, m in read_tlog(tmp_path / "mavsim.tlog")
+                if m.get_type() == "TIMESYNC" and m.tc1 != 0 and m.get_srcComponent() != 1]
+    assert len(answered) > 50
     # Plans came back from the planning process some ticks after their requests; the log
     # says when, and the replay applies each at the same tick: every command reproduced.
     offboard = dataclasses.replace(load_scenario(SCENARIO).offboard, hold_after_goal_s=1.0)  # demo --realtime: fly --exit-after-goal 1
@@ -40,6 +48,7 @@ def test_that_offboard_is_engaged_and_the_goal_reached_over_udp_and_the_log_repl
     assert res.unmatched_commands == 0 and res.tick_mismatches == 0
     assert res.max_abs_diff_mps == 0.0
     assert len(res.companion.records) == summary["replans"]
+    assert res.companion.perception.clock.summary()["timesync_answers"] == clock["timesync_answers"]
 
 
 def test_that_a_port_taken_between_its_pick_and_flys_bind_gets_fresh_ports_not_a_failed_run(capsys, monkeypatch):

@@ -97,7 +97,8 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
     result["companion_report"] = {k: report.get(k) for k in ("phase", "goal_reached_companion_t_s", "replans",
                                                              "min_realised_contour", "replans_with_slack",
                                                              "failed_plans", "plan_status", "failsafe_events",
-                                                             "planner_process", "inbound_superseded", "setpoint_gap_max_ms")}
+                                                             "planner_process", "inbound_superseded", "setpoint_gap_max_ms",
+                                                             "vehicle_clock")}
     obs = world.obs
     result["world_errors"] = world.errors
     truth_t = np.array([t for t, _ in obs.truth])

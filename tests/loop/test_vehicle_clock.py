@@ -1,0 +1,165 @@
+"""The autopilot's clock on link time: pose arrivals, TIMESYNC round trips, and how they combine."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.loop.app import CLOCK_DISAGREES_TEXT, Companion
+from companion.loop.config import load_scenario
+from companion.loop.vehicle_clock import VehicleClock, link_ns
+from companion.mavlink.link import Received
+
+EPOCH = 1_764_633_600.0  # link time as a real link has it: Unix seconds
+
+
+class _Autopilot:
+    """A vehicle clock ``t_v = (t_link - EPOCH - boot) * (1 - slow)`` with one-way latencies."""
+
+    def __init__(self, boot_s=-12.0, slow=0.008, up_s=0.004, down_s=0.004, rng=None):
+        self.boot_s, self.slow, self.up_s, self.down_s = boot_s, slow, up_s, down_s
+        self.rng = rng or np.random.default_rng(0)
+
+    def vehicle(self, t_link: float) -> float:
+        return (t_link - EPOCH - self.boot_s) * (1.0 - self.slow)
+
+    def true_offset(self, t_link: float) -> float:
+        return t_link - self.vehicle(t_link)
+
+    def fly(self, clock: VehicleClock, t0: float, t1: float, pose_hz=30.0, sync_hz=2.0, jitter_s=0.002):
+        """Poses (stamped at send, arriving after ``down_s`` plus jitter) and round trips."""
+        t = t0
+        next_sync = t0
+        while t < t1:
+            clock.observe_pose(t + self.down_s + self.rng.uniform(0, jitter_s), self.vehicle(t))
+            if t >= next_sync:
+                ts1 = clock.request(t)
+                t_at_vehicle = t + self.up_s + self.rng.uniform(0, jitter_s)
+                t_back = t_at_vehicle + self.down_s + self.rng.uniform(0, jitter_s)
+                clock.answer(t_back, link_ns(self.vehicle(t_at_vehicle)), ts1)
+                next_sync += 1.0 / sync_hz
+            t += 1.0 / pose_hz
+        return t
+
+
+def test_that_timesync_recovers_a_drifting_clock_where_the_arrival_bound_carries_the_latency():
+    ap = _Autopilot(slow=0.008, up_s=0.030, down_s=0.030)  # a radio link: 30 ms each way
+    clock = VehicleClock()
+    t_end = ap.fly(clock, EPOCH, EPOCH + 20.0)
+    truth = ap.true_offset(t_end)
+    assert clock.summary(t_end)["source"] == "timesync"
+    assert abs(clock.offset(t_end) - truth) < 2e-3  # symmetric legs: the midpoint is right, drift fitted
+    # the arrival bound is off by the 30 ms latency less the drift over its 2 s window (16 ms)
+    assert clock.one_way_offset(t_end) - truth == pytest.approx(0.030 - 2.0 * 0.008, abs=2e-3)
+    assert clock.summary(t_end)["drift"] == pytest.approx(0.008, abs=5e-4)
+
+
+def test_that_an_answer_stamped_late_by_a_stepping_clock_is_capped_by_the_arrival_bound():
+    ap = _Autopilot(slow=0.0, up_s=0.001, down_s=0.001)
+    clock = VehicleClock()
+    t = EPOCH
+    for k in range(200):  # the answers carry the clock of the last 20 ms simulation step
+        clock.observe_pose(t + 0.001, ap.vehicle(t))
+        if k % 15 == 0:
+            ts1 = clock.request(t)
+            stepped = np.floor((ap.vehicle(t + 0.001)) / 0.02) * 0.02 - 0.015
+            clock.answer(t + 0.002, link_ns(stepped), ts1)
+        t += 1 / 30
+    assert clock.sync_offset(t) > clock.one_way_offset(t)
+    assert clock.offset(t) == clock.one_way_offset(t)
+    assert clock.summary(t)["source"] == "arrivals" and not clock.disagrees
+
+
+def test_that_answers_on_another_clock_are_set_aside_after_three_and_never_used_before():
+    ap = _Autopilot(slow=0.0)
+    clock = VehicleClock()
+    t = EPOCH
+    used = []
+    for k in range(120):
+        clock.observe_pose(t + 0.004, ap.vehicle(t))
+        if k % 10 == 0:
+            ts1 = clock.request(t)
+            clock.answer(t + 0.008, link_ns(t - 3600.0), ts1)  # a Unix clock an hour off, not the boot clock
+            used.append(clock.offset(t + 0.008))
+        t += 1 / 30
+    assert clock.disagrees
+    for offset in used:  # the wrong clock never moved the mapping, not even before it was set aside
+        assert abs(offset - ap.true_offset(t)) < 0.01
+    assert clock.summary(t)["source"] == "arrivals"
+
+
+def test_that_only_answers_to_our_own_recent_requests_count_and_memory_stays_bounded():
+    clock = VehicleClock()
+    clock.observe_pose(EPOCH, 10.0)
+    assert not clock.answer(EPOCH + 0.01, link_ns(10.0), link_ns(EPOCH - 5.0))  # someone else's request
+    for k in range(1000):
+        clock.request(EPOCH + k * 0.001)
+    assert not clock.answer(EPOCH + 2.0, link_ns(12.0), link_ns(EPOCH))  # ours, but long forgotten
+    ts1 = clock.request(EPOCH + 2.0)
+    assert not clock.answer(EPOCH + 1.0, link_ns(12.0), ts1)  # back before it was sent
+    assert clock.summary()["timesync_foreign"] == 2
+    assert len(clock._pending) <= 32 and len(clock._round_trips) <= 64
+
+
+def test_that_the_arrival_bound_takes_over_when_answers_stop():
+    ap = _Autopilot(slow=0.0, up_s=0.02, down_s=0.02)
+    clock = VehicleClock()
+    t = ap.fly(clock, EPOCH, EPOCH + 5.0)
+    assert clock.summary(t)["source"] == "timesync"
+    t = ap.fly(clock, t, t + 10.0, sync_hz=1e-9)  # one request at the start, then none
+    assert clock.summary(t)["source"] == "arrivals"
+    assert clock.offset(t) == clock.one_way_offset(t)
+
+
+# ---------------------------------------------------------------------------- the companion's side
+
+
+def _received(msg, src=(1, 1), t_s=EPOCH) -> Received:
+    mav = mavlink2.MAVLink(None, *src)
+    raw = bytes(msg.pack(mav))
+    return Received(t_s, mav.parse_buffer(raw)[0], raw)
+
+
+def _heartbeat():
+    return mavlink2.MAVLink_heartbeat_message(2, 12, 157, 50593792, 4, 3)
+
+
+def test_that_the_companion_answers_the_autopilots_timesync_at_once_and_no_one_elses():
+    companion = Companion(load_scenario("configs/antipodal.toml"))
+    request = mavlink2.MAVLink_timesync_message(0, 8_048_000_000)
+    assert companion.handle(_received(request)) == []  # the autopilot is not known yet
+    companion.handle(_received(_heartbeat()))
+    (answer,) = companion.handle(_received(request, t_s=EPOCH + 0.25))
+    assert answer.get_type() == "TIMESYNC" and answer.ts1 == 8_048_000_000 and answer.tc1 == link_ns(EPOCH + 0.25)
+    assert companion.handle(_received(request, src=(7, 1))) == []  # another system's request
+    assert companion.handle(_received(mavlink2.MAVLink_timesync_message(123, 456))) == []  # an answer, not ours
+
+
+def test_that_the_companion_asks_the_autopilot_at_timesync_hz_and_never_before_it_is_known(tmp_path):
+    for rate, expected in ((2.0, 5), (0.0, 0)):
+        text = open("configs/antipodal.toml").read().replace("[companion]", f"[companion]\ntimesync_hz = {rate}", 1)
+        path = tmp_path / f"s{rate}.toml"
+        path.write_text(text)
+        companion = Companion(load_scenario(path))
+        assert not any(m.get_type() == "TIMESYNC" for m in companion.tick(EPOCH))
+        companion.handle(_received(_heartbeat()))
+        sent = [m for k in range(1, 51) for m in companion.tick(EPOCH + 0.05 * k) if m.get_type() == "TIMESYNC"]
+        assert len(sent) == expected and all(m.tc1 == 0 for m in sent)
+
+
+def test_that_a_companion_whose_autopilot_answers_on_another_clock_says_so_once():
+    companion = Companion(load_scenario("configs/antipodal.toml"))
+    companion.handle(_received(_heartbeat()))
+    texts = []
+    for k in range(200):
+        t = EPOCH + 0.05 * k
+        companion.handle(_received(mavlink2.MAVLink_local_position_ned_message(int(1000 * (t - EPOCH + 30)), 0, 0, -5, 0, 0, 0), t_s=t))
+        for m in companion.tick(t):
+            if m.get_type() == "TIMESYNC" and m.tc1 == 0:
+                companion.handle(_received(mavlink2.MAVLink_timesync_message(link_ns(t), m.ts1), t_s=t + 0.002))
+            elif m.get_type() == "STATUSTEXT":
+                texts.append(m.text)
+    assert texts.count(CLOCK_DISAGREES_TEXT) == 1
+    assert companion.perception.clock.disagrees
+    assert abs(companion.vehicle_time(EPOCH + 9.95) - 39.95) < 0.01  # the pose stamps, not the Unix answers
