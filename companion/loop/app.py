@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import deque
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
@@ -111,6 +112,7 @@ class Companion:
         self._signatures_announced = 0
         self._last_signature_warn = -math.inf
         self._last_timesync_t: float | None = None
+        self._arrival_delays: deque[float] = deque(maxlen=5)  # link s from request to the tick that took the plan
         self._clock_warning = False
 
     @property
@@ -281,6 +283,7 @@ class Companion:
                 continue
             if result.job.t_link_s != t_s:
                 said.append(messages.named_value_float(int(round(t_s * 1000)), PLAN_ARRIVED, float(result.job.seq)))
+            self._arrival_delays.append(t_s - result.job.t_link_s)
             if apply:
                 said.extend(self._apply_plan(result, t_s))
             else:
@@ -329,13 +332,17 @@ class Companion:
     def _request_plan(self, t_s: float, t_v: float) -> Outbox:
         """Build the replan due now and hand it to the planning service."""
         said: Outbox = []
+        lead = self.plan_lead_s()
+        velocity = self.perception.drone.state.velocity
         job = self.builder.build(
             seq=self._replans_asked,
             t_s=t_s,
             t_v=t_v,
             perception=self.perception,
-            initial_velocity=self.executor.initial_velocity(self.perception.drone.state.velocity, t_v),
+            initial_velocity=self.executor.initial_velocity(velocity, t_v + lead),
             warm_start=self.executor.plan,
+            lead_s=lead,
+            shift=self.executor.displacement(t_v, t_v + lead, velocity) if lead > 0.0 else None,
         )
         self._replans_asked += 1
         self._last_replan_t = t_s
@@ -359,6 +366,21 @@ class Companion:
         self.planning.submit(job)
         return said
 
+    def plan_lead_s(self) -> float:
+        """How long after its request the next plan starts (s): the longest of the last five
+        plans' arrival delays (link time from request to the tick that took the plan), at most
+        ``[companion] plan_lead_max_s`` and a setpoint period short of the replan period.
+
+        0 in lockstep and its replays, where a plan comes back in the tick that asked for it.
+        In real time it plans from where the drone will be when the plan takes over, not from
+        where it was when asked; the delays are the recorded arrival ticks, so a replay of a
+        real-time log computes the same leads.
+        """
+        if not self._arrival_delays or self.executor.waiting:
+            return 0.0
+        cap = min(self.loop.plan_lead_max_s, self.cfg.replan_period_s - 1.0 / self.loop.setpoint_rate_hz)
+        return max(0.0, min(max(self._arrival_delays), cap))
+
     def _apply_plan(self, result: PlanResult, t_s: float) -> Outbox:
         """Adopt (or refuse) a finished plan at link time ``t_s`` and record it."""
         said: Outbox = []
@@ -377,7 +399,7 @@ class Companion:
                 # replan_period_s (3.3 Hz), about 60 bytes each, well within a telemetry link.
                 said.append(self._say(t_s, SEV_WARNING,
                                       f"companion: safety slack used ({plan.slack_max:.2f}) #{self.state.slack_plans}"))
-            self.executor.adopt(plan, job.t_vehicle_s, job.t_link_s, job.position)
+            self.executor.adopt(plan, job.t_vehicle_s, job.t_link_s, job.position, now_v=self.perception.vehicle_time(t_s))
         # Obstacles beyond sensing range were ignored by design: their contour says nothing.
         in_range = np.asarray(plan.in_range, dtype=bool)
         ct_plan = np.asarray(plan.contour_of_touch)[in_range]

@@ -149,6 +149,9 @@ class LoopConfig:
     max_plan_age_s : link seconds after its request past which a plan is no longer flown
         (the stream brakes within the acceleration bound until a newer plan arrives), in (0, 10].
 
+    plan_lead_max_s : longest lead a real-time plan starts ahead of its request, s, in [0, 1]
+        (0: from the request's state, as in lockstep); the lead follows the recent plans'
+        arrival delays (:meth:`companion.loop.app.Companion.plan_lead_s`).
     timesync_hz : rate of the TIMESYNC requests that measure the autopilot's clock, Hz, in [0, 50];
         0 maps it from pose arrival times only (:mod:`companion.loop.vehicle_clock`).
     setpoint_kind : ``"velocity"`` (default) streams the plan's velocity commands;
@@ -167,6 +170,7 @@ class LoopConfig:
     max_constrained_tracks: int = 8
     setpoint_kind: str = "velocity"
     timesync_hz: float = 2.0
+    plan_lead_max_s: float = 0.25
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -177,6 +181,7 @@ class LoopConfig:
         set_("drone_cov_floor_m2", check.number("drone_cov_floor_m2", self.drone_cov_floor_m2, lo=0.0, hi=100.0))
         check.choice("setpoint_kind", self.setpoint_kind, ("velocity", "position_velocity"))
         set_("max_plan_age_s", check.number("max_plan_age_s", self.max_plan_age_s, positive=True, hi=10.0))
+        set_("plan_lead_max_s", check.number("plan_lead_max_s", self.plan_lead_max_s, lo=0.0, hi=1.0))
         set_("timesync_hz", check.number("timesync_hz", self.timesync_hz, lo=0.0, hi=50.0))
         set_("max_constrained_tracks", check.integer("max_constrained_tracks", self.max_constrained_tracks, lo=1, hi=64))
 

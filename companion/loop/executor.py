@@ -54,16 +54,34 @@ class Executor:
         self.plan_t_link_s = 0.0      # link time of the plan's request (s)
         self.plan_p0 = np.zeros(3)    # drone position the plan starts from, NED m
         self.command = np.zeros(3)    # last command sent, NED m/s
+        self._next: tuple | None = None  # (plan, t0_v, t_link_s, p0) waiting for its start
 
-    def adopt(self, plan: Plan, t_vehicle_s: float, t_link_s: float, position: np.ndarray | None = None) -> None:
+    def adopt(self, plan: Plan, t_vehicle_s: float, t_link_s: float, position: np.ndarray | None = None,
+              now_v: float | None = None) -> None:
         """Put ``plan`` in force; it starts at vehicle time ``t_vehicle_s`` from ``position`` (NED m),
-        requested at link time ``t_link_s``."""
-        self.plan, self.plan_t0_v, self.plan_t_link_s = plan, float(t_vehicle_s), float(t_link_s)
-        self.plan_p0 = np.zeros(3) if position is None else np.asarray(position, dtype=float).copy()
+        requested at link time ``t_link_s``.
+
+        A plan that starts later than ``now_v`` (vehicle s; real time plans from where the
+        drone will be when it arrives) waits while a plan is in force: the one in force is
+        flown up to the new one's start, as the new one assumed. Without a plan in force it
+        is flown at once.
+        """
+        p0 = np.zeros(3) if position is None else np.asarray(position, dtype=float).copy()
+        if now_v is not None and self.plan is not None and t_vehicle_s > now_v + 0.5 * self._dt:
+            self._next = (plan, float(t_vehicle_s), float(t_link_s), p0)
+            return
+        self._next = None
+        self.plan, self.plan_t0_v, self.plan_t_link_s, self.plan_p0 = plan, float(t_vehicle_s), float(t_link_s), p0
+
+    @property
+    def waiting(self) -> bool:
+        """A plan has arrived and waits for its start (see :meth:`adopt`)."""
+        return self._next is not None
 
     def drop(self) -> None:
-        """No plan in force (the next commands brake)."""
+        """No plan in force or waiting (the next commands brake)."""
         self.plan = None
+        self._next = None
 
     def hold(self) -> np.ndarray:
         """Zero velocity (hover while not engaged); returns the command."""
@@ -78,6 +96,8 @@ class Executor:
 
     def follow(self, t_s: float, t_v: float) -> tuple[np.ndarray, Follow]:
         """This tick's command at link time ``t_s`` and vehicle time ``t_v``, and why."""
+        if self._next is not None and (self.plan is None or t_v >= self._next[1] - 0.5 * self._dt):
+            (self.plan, self.plan_t0_v, self.plan_t_link_s, self.plan_p0), self._next = self._next, None
         if self.plan is None:
             return self.brake(), Follow.NO_PLAN
         if t_s - self.plan_t_link_s > self.max_plan_age_s + 1e-9:
@@ -104,6 +124,17 @@ class Executor:
         if self.plan is None:
             return np.asarray(estimated_velocity, dtype=float).copy()
         return self._lag.velocity_at(self.plan.initial_velocity, self.plan.commands, t_v - self.plan_t0_v)
+
+    def displacement(self, t_from_v: float, t_to_v: float, estimated_velocity: np.ndarray) -> np.ndarray:
+        """How far the drone moves from vehicle time ``t_from_v`` to ``t_to_v`` (NED m): along the
+        plan in force (its step-end positions, interpolated), else at ``estimated_velocity``."""
+        if self.plan is None:
+            return np.asarray(estimated_velocity, dtype=float) * (t_to_v - t_from_v)
+        tau = self.cfg.step_s
+        times = tau * np.arange(self.plan.positions.shape[0] + 1)
+        points = np.vstack([self.plan_p0[None], self.plan.positions])
+        a, b = t_from_v - self.plan_t0_v, t_to_v - self.plan_t0_v
+        return np.array([np.interp(b, times, points[:, k]) - np.interp(a, times, points[:, k]) for k in range(3)])
 
     def reference(self, t_v: float) -> tuple[np.ndarray, np.ndarray] | None:
         """Position and velocity of the plan in force at vehicle time ``t_v`` (NED m, m/s), or None.

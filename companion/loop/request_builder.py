@@ -33,7 +33,8 @@ class ReplanJob:
     seq : int
         Replan number (0, 1, ...) of this companion.
     t_link_s, t_vehicle_s : float
-        Link time of the request and the vehicle time the plan starts from (s).
+        Link time of the request and the vehicle time the plan starts from (s): the
+        request's own in lockstep, a lead later in real time (see :meth:`RequestBuilder.build`).
     request : PlanRequest
         The problem.
     warm_start : Plan or None
@@ -42,7 +43,7 @@ class ReplanJob:
         Drone position estimate extrapolated to ``t_vehicle_s`` (NED m), its planning
         covariance now (m^2), its velocity estimate (m/s) and the waypoint (NED m).
     obstacle_positions, obstacle_covs : dict
-        Every track's estimate at ``t_vehicle_s`` (NED m, m^2), keyed by track.
+        Every track's estimate at the request (NED m, m^2), keyed by track.
     realised_contour : dict
         Contour of touch between the drone's and each track's estimate now, keyed by track.
     tracks_unconstrained : tuple
@@ -166,25 +167,32 @@ class RequestBuilder:
         perception: Perception,
         initial_velocity: np.ndarray,
         warm_start: Plan | None,
+        lead_s: float = 0.0,
+        shift: np.ndarray | None = None,
     ) -> ReplanJob:
         """The planning problem at link time ``t_s`` / vehicle time ``t_v`` from the current estimates.
 
-        ``initial_velocity`` is ``V_0`` (NED m/s, see :meth:`companion.loop.executor.Executor.initial_velocity`).
-        Tracks silent for longer than the tracker's ``drop_after_s`` are pruned first.
+        ``initial_velocity`` is ``V_0`` (NED m/s, see :meth:`companion.loop.executor.Executor.initial_velocity`)
+        at the plan's start. The plan starts ``lead_s`` after ``t_v`` (0 in lockstep; in real
+        time about when it will arrive), from the position estimate now moved by ``shift``
+        (NED m: how far the plan in force takes the drone meanwhile); obstacles are predicted
+        from that start. Tracks silent for longer than the tracker's ``drop_after_s`` are pruned first.
         """
         est = perception.drone.state
         n, tau = self.cfg.horizon_steps, self.cfg.step_s
-        position = est.position + est.velocity * max(0.0, t_v - est.t_s)
-        cov_now, drone_covs = self.drone_covariances(perception, t_v)
+        position_now = est.position + est.velocity * max(0.0, t_v - est.t_s)
+        position = position_now if shift is None else position_now + shift
+        t0 = t_v + lead_s
+        cov_now, drone_covs = self.drone_covariances(perception, t0)
 
         tracker = perception.tracker
         tracker.prune(t_v)
-        times = t_v + tau * np.arange(1, n + 1)
+        times = t0 + tau * np.arange(1, n + 1)
         keys = list(tracker.keys())
         states = {k: tracker.state(k) for k in keys} if len(keys) > self.loop.max_constrained_tracks \
             or self.scenario.walls else {}  # read once: 200 tracks cost about 5 ms per pass
-        near, beyond = self._split_beyond_walls(keys, states, perception, t_v)
-        constrained, left_out = self._select(near, states, t_v, position, initial_velocity, cov_now)
+        near, beyond = self._split_beyond_walls(keys, states, perception, t0)
+        constrained, left_out = self._select(near, states, t0, position, initial_velocity, cov_now)
         now_left_out = self._estimates_now(left_out + beyond, states, t_v)
         means, covs, radii, now_pos, now_cov = [], [], [], {}, {}
         for key in constrained:
@@ -217,7 +225,7 @@ class RequestBuilder:
         return ReplanJob(
             seq=seq,
             t_link_s=t_s,
-            t_vehicle_s=t_v,
+            t_vehicle_s=t0,
             request=request,
             warm_start=warm_start,
             position=position,
@@ -226,7 +234,7 @@ class RequestBuilder:
             target=target,
             obstacle_positions=now_pos,
             obstacle_covs=now_cov,
-            realised_contour=self._realised_contour(position, cov_now, keys, now_pos, now_cov),
+            realised_contour=self._realised_contour(position_now, cov_now, keys, now_pos, now_cov),
             tracks_unconstrained=tuple(left_out),
             tracks_constrained=tuple(constrained),
             tracks_beyond_walls=tuple(beyond),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from companion.core.planner import Planner, PlannerConfig
 from companion.loop.executor import Executor, Follow
@@ -57,3 +58,40 @@ def test_that_without_a_plan_the_executor_brakes():
     ex.command = np.array([1.0, 0.0, 0.0])
     cmd, why = ex.follow(0.0, 0.0)
     assert why is Follow.NO_PLAN and cmd[0] == 1.0 - 0.5 * 0.05
+
+
+class _PlanWithPath(_Plan):
+    def __init__(self, commands, positions):
+        super().__init__(commands)
+        self.positions = np.asarray(positions, dtype=float)
+
+
+def test_that_a_plan_starting_later_waits_while_the_plan_in_force_is_flown_up_to_its_start():
+    ex, _ = _executor()
+    ex.adopt(_Plan([[1, 0, 0]] * 4), t_vehicle_s=10.0, t_link_s=100.0)
+    ex.adopt(_Plan([[0, 2, 0]] * 4), t_vehicle_s=10.25, t_link_s=100.05, now_v=10.1)  # arrived 0.15 s early
+    assert ex.waiting
+    assert ex.follow(100.1, 10.1)[0].tolist() == [1, 0, 0]
+    assert ex.follow(100.15, 10.15)[0].tolist() == [1, 0, 0]
+    cmd, why = ex.follow(100.25, 10.25)
+    assert cmd.tolist() == [0, 2, 0] and why is Follow.PLAN and not ex.waiting
+    assert ex.plan_t0_v == 10.25 and ex.plan_t_link_s == 100.05  # its age still counts from its request
+
+
+def test_that_a_later_plan_is_flown_at_once_without_a_plan_in_force_and_a_drop_clears_a_waiting_one():
+    ex, _ = _executor()
+    ex.adopt(_Plan([[0, 2, 0]] * 4), t_vehicle_s=10.25, t_link_s=100.0, now_v=10.1)
+    assert not ex.waiting and ex.follow(100.1, 10.1)[0].tolist() == [0, 2, 0]
+    ex.adopt(_Plan([[3, 0, 0]] * 4), t_vehicle_s=10.5, t_link_s=100.2, now_v=10.2)
+    assert ex.waiting
+    ex.drop()
+    assert not ex.waiting and ex.follow(100.6, 10.6)[1] is Follow.NO_PLAN
+
+
+def test_that_the_displacement_follows_the_plan_in_force_and_the_estimate_without_one():
+    ex, _ = _executor()
+    assert ex.displacement(1.0, 1.2, np.array([1.0, -2.0, 0.0])).tolist() == pytest.approx([0.2, -0.4, 0.0])
+    path = [[5.3, 0, -2], [5.9, 0, -2], [6.5, 0, -2], [7.1, 0, -2]]  # step-end positions, 0.3 s steps, NED m
+    ex.adopt(_PlanWithPath([[1, 0, 0], [2, 0, 0], [2, 0, 0], [2, 0, 0]], path), t_vehicle_s=10.0, t_link_s=0.0,
+             position=np.array([5.0, 0.0, -2.0]))
+    assert ex.displacement(10.15, 10.45, np.zeros(3)).tolist() == pytest.approx([5.6 - 5.15, 0.0, 0.0])

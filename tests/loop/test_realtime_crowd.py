@@ -4,11 +4,11 @@ mavsim and ``companion fly`` run as two processes over loopback UDP while 200 ex
 systems report ODOMETRY at 1 Hz from 6-10 m beside the route to the companion's obstacle
 port. The setpoint stream must hold 20 Hz with no gap over 150 ms, OFFBOARD must hold
 until the goal, nothing may collide, and the crowd must really be tracked. 60-100 s of wall
-time per scene. Antipodal is marked realtime (``make realtime-test``, run by CI). Corridor is
-marked ``crowd`` (``make crowd-test``, not run by CI) because it does not hold yet: the crowd
-now stands beyond the corridor's walls and costs the planner nothing, and the stream holds,
-but in one of two quiet runs the corridor's ``c_max`` flight touched its leader (true clearance
--0.08 m; issue 14 stays open on it; docs/REALTIME.md gives the measured runs).
+time per scene. Both are marked realtime (``make realtime-test``, run by CI); ``crowd`` selects
+them alone (``make crowd-test``). The corridor's crowd stands beyond its walls and costs the
+planner nothing; its ``c_max`` flight touched the leader in one of three quiet runs (true
+clearance -0.08 m) until real-time plans started from where the drone would be when they take
+over (``Companion.plan_lead_s``; docs/REALTIME.md has the runs).
 
 Run: ``make realtime-test`` and ``make crowd-test``
 """
@@ -23,14 +23,18 @@ from companion.cli import main
 
 
 @pytest.mark.realtime
-@pytest.mark.parametrize("scene", ["antipodal", pytest.param("corridor", marks=pytest.mark.crowd)])
+@pytest.mark.crowd
+@pytest.mark.parametrize("scene", ["antipodal", "corridor"])
 def test_that_the_stream_holds_20_hz_and_the_flight_is_safe_with_200_extra_obstacle_systems(scene, capsys):
     assert main(["demo", scene, "--realtime", "--crowd", "200", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     events = [text for _, text in summary.get("events", [])]
     assert any("ENGAGED" in t for t in events), summary.get("fly_error") or events
     assert summary["crowd_reports_sent"] > 2000
-    assert summary["tracks"] >= 200 and summary["tracks_unconstrained_max"] > 0  # the crowd was tracked
+    # the crowd was tracked: left out of replans by the track limit (antipodal), or set apart
+    # beyond the walls (corridor: a track beyond a wall for the whole horizon needs no rows)
+    set_aside = summary["tracks_unconstrained_max"] + summary["tracks_beyond_walls_max"]
+    assert summary["tracks"] >= 200 and set_aside >= 150, (summary["tracks"], set_aside)
     # OFFBOARD held to the goal: the companion reached it and handed back in Hold, never lost it first
     assert summary["goal_reached"] is True and summary["collided"] is False, (summary.get("min_true_clearance_m"), events)
     lost = [t for t in events if t.startswith(("PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP"))]
