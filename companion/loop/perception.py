@@ -3,8 +3,8 @@
 Time bases: *link time* (wall clock on a real link, simulated time in lockstep) schedules
 replans and setpoints; *vehicle time* (the autopilot's boot clock, from the messages'
 own stamps) stamps the estimates. :class:`~companion.loop.vehicle_clock.VehicleClock`
-joins them: from the autopilot's TIMESYNC answers when it gives them, else from the
-smallest ``t_rx - t_msg`` of its recent accepted pose messages (latency only adds to it).
+joins them: the smallest ``t_rx - t_msg`` of the autopilot's recent accepted pose messages
+(latency only adds to it), lowered by its TIMESYNC answers where they show the latency.
 """
 
 from __future__ import annotations

@@ -40,8 +40,9 @@ class ReplanJob:
     warm_start : Plan or None
         The plan in force when the request was built.
     position, drone_cov, drone_velocity, target : ndarray
-        Drone position estimate extrapolated to ``t_vehicle_s`` (NED m), its planning
-        covariance now (m^2), its velocity estimate (m/s) and the waypoint (NED m).
+        Drone position the plan starts from (NED m: the estimate extrapolated to the request,
+        moved along the plan in force up to ``t_vehicle_s``), its planning covariance now
+        (m^2), its velocity estimate (m/s) and the waypoint (NED m).
     obstacle_positions, obstacle_covs : dict
         Every track's estimate at the request (NED m, m^2), keyed by track.
     realised_contour : dict

@@ -133,9 +133,14 @@ def format_report(report: dict) -> str:
 
 def _clock_line(clock: dict) -> str:
     """How link time was mapped onto the autopilot's clock, in one line."""
-    if clock["source"] != "timesync":
-        why = "; TIMESYNC disagreed with the pose stamps" if clock["timesync_disagrees"] else \
-            f"; {clock['timesync_answers']} TIMESYNC answers of {clock['timesync_requests']} requests"
-        return f"{clock['source']}{why}"
-    return (f"timesync (shortest round trip {_fmt(clock['rtt_min_ms'])} ms, drift {_fmt(clock['drift'])}, "
-            f"arrival bound {_fmt(clock['one_way_minus_timesync_ms'])} ms above)")
+    gap = clock["one_way_minus_timesync_ms"]  # arrival bound minus the TIMESYNC estimate
+    if clock["source"] == "timesync":
+        return (f"TIMESYNC (arrival bound {_fmt(gap)} ms above it; shortest round trip "
+                f"{_fmt(clock['rtt_min_ms'])} ms, drift {_fmt(clock['drift'])})")
+    if clock["timesync_disagrees"]:
+        return "pose arrivals (TIMESYNC answers disagreed with the pose stamps)"
+    if gap is None:
+        return f"pose arrivals ({clock['timesync_answers']} TIMESYNC answers of {clock['timesync_requests']} requests)"
+    if -gap < 0.05:
+        return "pose arrivals (TIMESYNC agrees)"
+    return f"pose arrivals (TIMESYNC answers stamped {_fmt(-gap)} ms late)"

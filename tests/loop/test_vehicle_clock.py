@@ -163,3 +163,19 @@ def test_that_a_companion_whose_autopilot_answers_on_another_clock_says_so_once(
     assert texts.count(CLOCK_DISAGREES_TEXT) == 1
     assert companion.perception.clock.disagrees
     assert abs(companion.vehicle_time(EPOCH + 9.95) - 39.95) < 0.01  # the pose stamps, not the Unix answers
+
+
+def test_that_the_summary_line_says_which_clock_was_used_and_why():
+    from companion.offline.report import format_report
+
+    def line(**clock):
+        base = {"source": "arrivals", "timesync_requests": 10, "timesync_answers": 10, "timesync_foreign": 0,
+                "timesync_disagrees": False, "rtt_min_ms": 2.4, "drift": 1e-5, "one_way_minus_timesync_ms": None}
+        text = format_report({"vehicle_clock": {**base, **clock}})
+        return next(x for x in text.splitlines() if x.startswith("autopilot clock from")).split("  ")[-1].strip()
+
+    assert line(source="timesync", one_way_minus_timesync_ms=0.39).startswith("TIMESYNC (arrival bound 0.39 ms above")
+    assert line(one_way_minus_timesync_ms=-19.3) == "pose arrivals (TIMESYNC answers stamped 19.3 ms late)"
+    assert line(one_way_minus_timesync_ms=0.0) == "pose arrivals (TIMESYNC agrees)"
+    assert line(timesync_disagrees=True) == "pose arrivals (TIMESYNC answers disagreed with the pose stamps)"
+    assert line(timesync_answers=0) == "pose arrivals (0 TIMESYNC answers of 10 requests)"
