@@ -13,6 +13,7 @@ These functions are pure parsers; the filters decide what to do with what they r
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 
@@ -27,6 +28,7 @@ XYZ_VARIANCE_INDICES = (0, 6, 11)
 """Indices of the x, y, z variances in the 21-element upper triangle."""
 
 _ROWS, _COLS = np.triu_indices(6)  # row-major order of the upper triangle
+_TINY = float(np.finfo(float).tiny)
 
 
 def upper_triangle_to_matrix(arr21: np.ndarray | list[float]) -> np.ndarray:
@@ -123,6 +125,8 @@ def covariance_problem(cov: np.ndarray, *, rtol: float = 1e-9) -> str | None:
     """
     if cov.ndim != 2 or cov.shape[0] != cov.shape[1]:
         return f"covariance has shape {cov.shape}, expected square"
+    if cov.shape == (3, 3):
+        return _problem_3x3(cov.tolist(), rtol)
     if not np.all(np.isfinite(cov)):
         return "covariance has non-finite entries"
     scale = max(float(np.max(np.abs(cov))), np.finfo(float).tiny)
@@ -131,6 +135,34 @@ def covariance_problem(cov: np.ndarray, *, rtol: float = 1e-9) -> str | None:
     try:
         np.linalg.cholesky(cov)
     except np.linalg.LinAlgError:
+        return "covariance is not positive definite"
+    return None
+
+
+def _problem_3x3(c: list[list[float]], rtol: float) -> str | None:
+    """:func:`covariance_problem` for 3x3, on Python floats (3 to 6 us a report against 23 to 31 us with numpy).
+
+    The same checks in the same order; positive definiteness by the Cholesky pivots in
+    closed form (each must be positive, as LAPACK's factorisation requires).
+    """
+    (a, b, c_), (d, e, f), (g, h, i) = c
+    values = (a, b, c_, d, e, f, g, h, i)
+    if not all(math.isfinite(x) for x in values):
+        return "covariance has non-finite entries"
+    scale = max(max(abs(x) for x in values), _TINY)
+    if max(abs(b - d), abs(c_ - g), abs(f - h)) > rtol * scale:
+        return "covariance is not symmetric"
+    # Cholesky of the lower triangle (LAPACK reads one triangle): pivots l11^2, l22^2, l33^2
+    if not a > 0.0:
+        return "covariance is not positive definite"
+    l11 = math.sqrt(a)
+    l21, l31 = d / l11, g / l11
+    p2 = e - l21 * l21
+    if not p2 > 0.0:
+        return "covariance is not positive definite"
+    l22 = math.sqrt(p2)
+    l32 = (h - l31 * l21) / l22
+    if not i - l31 * l31 - l32 * l32 > 0.0:
         return "covariance is not positive definite"
     return None
 

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from estimator.covariance import (
     covariance_problem,
@@ -59,3 +62,26 @@ def test_that_covariance_problem_names_what_is_wrong(cov, message):
 
 def test_that_a_valid_covariance_has_no_problem():
     assert covariance_problem(np.array([[2.0, 0.3, 0], [0.3, 1.0, 0.1], [0, 0.1, 0.5]])) is None
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    arrays(np.float64, (3, 3), elements=st.floats(-10.0, 10.0)),
+    st.floats(-5.0, 5.0),
+    st.booleans(),
+)
+def test_that_the_3x3_check_agrees_with_numpys_cholesky(a, shift, symmetric):
+    """The closed-form 3x3 path decides as numpy's Cholesky does, away from singular matrices."""
+    cov = a @ a.T + shift * np.eye(3) if symmetric else a
+    sym = np.max(np.abs(cov - cov.T)) <= 1e-9 * max(np.max(np.abs(cov)), np.finfo(float).tiny)
+    if sym:
+        eig = np.linalg.eigvalsh(0.5 * (cov + cov.T))
+        assume(abs(eig.min()) > 1e-9 * max(1.0, np.abs(eig).max()))  # not on the boundary
+        try:
+            np.linalg.cholesky(cov)
+            expected = None
+        except np.linalg.LinAlgError:
+            expected = "covariance is not positive definite"
+    else:
+        expected = "covariance is not symmetric"
+    assert covariance_problem(cov) == expected
