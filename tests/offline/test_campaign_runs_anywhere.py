@@ -204,17 +204,3 @@ def test_that_an_unreachable_scheduler_is_one_clear_error(monkeypatch, capsys, t
     code = main(ARGS + ["--scheduler", f"tcp://127.0.0.1:{_free_port()}", "--results", str(tmp_path / "r.jsonl")])
     err = capsys.readouterr().err
     assert code == 2 and "cannot reach the Dask scheduler at tcp://127.0.0.1:" in err and "Traceback" not in err
-
-
-def _ignores_sigint() -> bool:
-    return signal.getsignal(signal.SIGINT) == signal.SIG_IGN
-
-
-def test_that_local_pool_workers_leave_ctrl_c_to_the_campaign_process():
-    """A worker interrupted mid-queue could leave the pool hung; the campaign process handles Ctrl-C alone."""
-    from companion.offline.campaign.run import open_executor
-
-    with open_executor(2) as (pool, n):
-        assert n == 2
-        assert all(pool.submit(_ignores_sigint).result(timeout=30) for _ in range(4))
-    assert not _ignores_sigint()  # the campaign process itself still takes Ctrl-C
