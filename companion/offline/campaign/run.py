@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import logging
 import os
-import signal
 import time
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -104,29 +103,19 @@ def open_executor(workers: int, scheduler: str | None = None) -> Iterator[tuple[
     elif workers == 1:
         yield None, 1
     else:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_ignore_interrupts) as pool:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
             yield pool, workers
-
-
-def _ignore_interrupts() -> None:
-    """Pool workers ignore Ctrl-C: the campaign process handles it (:func:`_stop`).
-
-    A worker interrupted while it waited for its next run died holding the pool's queue
-    lock, and the other workers then waited for that lock forever: a campaign stopped with
-    Ctrl-C hung (once in a CI run) instead of ending.
-    """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _stop(futures: dict, take: Callable[[Future], None]) -> None:
     """Interrupted (Ctrl-C): cancel the queued runs, and record the ones in flight as they finish.
 
-    Without this the executor's shutdown flew every queued run before the campaign ended:
-    up to hours of runs whose results were then thrown away. Local pool workers ignore
-    Ctrl-C (:func:`_ignore_interrupts`), so the runs in flight (one per worker, and the one
-    the pool has already handed on) finish and are recorded: the wait is bounded by about
-    two episodes. A run that does come back interrupted (KeyboardInterrupt) is not recorded:
-    ``--resume`` flies it. A second interrupt stops recording.
+    Without this the executor's shutdown flew every queued run before the campaign ended
+    (a pool worker returns an interrupted run as its result and takes the next): up to
+    hours of runs whose results were then thrown away. A run in flight is bounded by one
+    episode; one interrupted in its worker (Ctrl-C reaches the whole process group) comes
+    back as KeyboardInterrupt and is not recorded: ``--resume`` flies it. A second
+    interrupt stops recording.
     """
     cancelled = sum(f.cancel() for f in futures)
     running = [f for f in futures if not f.done()]
