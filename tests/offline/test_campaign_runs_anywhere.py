@@ -83,13 +83,21 @@ def test_that_a_campaign_killed_midway_resumes_to_the_uninterrupted_results(unin
     assert len(wall) == len(uninterrupted)
 
 
+def _sigint_default() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_that_ctrl_c_ends_a_campaign_promptly_keeping_every_finished_run(tmp_path):
     """Ctrl-C (SIGINT to the process group) cancels the queued runs instead of flying them all first."""
     results = tmp_path / "runs.jsonl"
     many = list(ARGS)
     many[many.index("--episodes") + 1] = "200"  # 400 runs: minutes to fly them all
+    # Ctrl-C as a terminal delivers it, whatever the suite inherited: a shell that starts the
+    # suite in the background (`make test &`) ignores SIGINT, every child inherits that, and
+    # the campaign would never see the interrupt (two verification runs hung here that way)
     proc = subprocess.Popen(COMPANION + many + ["--workers", "2", "--results", str(results)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_sigint_default)
     try:
         _wait_for_rows(results, 1, proc, DEADLINE_S)
         t0 = time.monotonic()
