@@ -129,7 +129,7 @@ def covariance_problem(cov: np.ndarray, *, rtol: float = 1e-9) -> str | None:
         return _problem_3x3(cov.tolist(), rtol)
     if not np.all(np.isfinite(cov)):
         return "covariance has non-finite entries"
-    scale = max(float(np.max(np.abs(cov))), np.finfo(float).tiny)
+    scale = max(float(np.max(np.abs(cov))), _TINY)
     if np.max(np.abs(cov - cov.T)) > rtol * scale:
         return "covariance is not symmetric"
     try:

@@ -11,6 +11,7 @@ import sys
 import time
 from importlib import resources
 from pathlib import Path
+from typing import NamedTuple
 
 from companion.commands._argtypes import integer_at_least, positive_number, seed
 from companion.errors import ConfigError
@@ -153,7 +154,22 @@ def _crowd(scenario: Path, n: int, seed: int, target_port: int, clock_port: int)
     return Crowd(positions_off_route(start, goal, n, seed=seed), ("127.0.0.1", target_port), clock_port).start()
 
 
-def _start_fly(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None, ports: list[int],
+class _Ports(NamedTuple):
+    """Loopback ports of one real-time demo: mavsim's links to fly and to the ground station, and its obstacle link."""
+
+    api: int
+    gcs: int
+    api_local: int
+    gcs_local: int
+    obstacle: int
+    obstacle_local: int
+
+    @classmethod
+    def pick(cls) -> "_Ports":
+        return cls(*(_free_udp_port() for _ in cls._fields))
+
+
+def _start_fly(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None, ports: _Ports,
                fly_duration_s: float) -> tuple[subprocess.Popen, list[str]]:
     """Start ``companion fly`` on ``ports`` and wait (bounded) until it listens; its process and mavsim's command.
 
@@ -199,7 +215,7 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
 
     fly_duration_s = load_scenario(scenario).duration_s / max(args.speed, 1e-3) + 30.0
     for attempt in range(1, _PORT_ATTEMPTS + 1):
-        ports = [_free_udp_port() for _ in range(6)]
+        ports = _Ports.pick()
         fly, sim_cmd = _start_fly(scenario, args, overrides, out, ports, fly_duration_s)
         if fly.poll() is None:
             break
@@ -208,13 +224,12 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
         _, err = fly.communicate()
         if "Address already in use" not in err or attempt == _PORT_ATTEMPTS:
             return {"mode": "realtime", "fly_error": err[-2000:]}
-    gcs_port, obstacle_port = ports[1], ports[4]  # the order _start_fly unpacks
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     crowd = None
     fly_error = None
     try:
         if args.crowd:
-            crowd = _crowd(scenario, args.crowd, args.seed, obstacle_port, gcs_port)  # on the obstacle link, as a perception source would
+            crowd = _crowd(scenario, args.crowd, args.seed, ports.obstacle, ports.gcs)  # on the obstacle link, as a perception source would
         try:
             fly_out, fly_err = fly.communicate(timeout=fly_duration_s + 60.0)
         except subprocess.TimeoutExpired:

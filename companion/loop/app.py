@@ -113,7 +113,7 @@ class Companion:
         self._last_signature_warn = -math.inf
         self._last_timesync_t: float | None = None
         self._arrival_delays: deque[float] = deque(maxlen=5)  # link s from request to the tick that took the plan
-        self._clock_warning = False
+        self._clock_warned = False  # CLOCK_DISAGREES_TEXT said (once a run)
 
     @property
     def planner(self) -> Planner:
@@ -188,11 +188,7 @@ class Companion:
         """Answer the autopilot's TIMESYNC request, or take its answer to ours as a clock sample."""
         if sync.is_request:
             return [messages.timesync(max(1, link_ns(t_rx)), sync.ts1_ns)]  # tc1 0 would read as a request
-        clock = self.perception.clock
-        was_disagreeing = clock.disagrees
-        clock.answer(t_rx, sync.tc1_ns, sync.ts1_ns)
-        if clock.disagrees and not was_disagreeing:
-            self._clock_warning = True  # said at the next tick
+        self.perception.clock.answer(t_rx, sync.tc1_ns, sync.ts1_ns)  # a disagreement is said at the next tick
         return []
 
     def on_signatures_rejected(self, total: int) -> None:
@@ -255,8 +251,8 @@ class Companion:
         """This tick's TIMESYNC request to the autopilot (every ``1 / timesync_hz`` s), and the
         warning that its TIMESYNC clock is not the one that stamps its poses."""
         out: Outbox = []
-        if self._clock_warning:
-            self._clock_warning = False
+        if self.perception.clock.disagrees and not self._clock_warned:
+            self._clock_warned = True
             out.append(self._say(t_s, SEV_WARNING, CLOCK_DISAGREES_TEXT))
         rate = self.loop.timesync_hz
         if rate > 0.0 and self.autopilot is not None and (

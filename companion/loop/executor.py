@@ -130,11 +130,14 @@ class Executor:
         plan in force (its step-end positions, interpolated), else at ``estimated_velocity``."""
         if self.plan is None:
             return np.asarray(estimated_velocity, dtype=float) * (t_to_v - t_from_v)
-        tau = self.cfg.step_s
-        times = tau * np.arange(self.plan.positions.shape[0] + 1)
+        return self._plan_position(t_to_v - self.plan_t0_v) - self._plan_position(t_from_v - self.plan_t0_v)
+
+    def _plan_position(self, dt: float) -> np.ndarray:
+        """Position of the plan in force ``dt`` s after its start (NED m): its step-end positions
+        interpolated from where it started, held at either end."""
+        times = self.cfg.step_s * np.arange(self.plan.positions.shape[0] + 1)
         points = np.vstack([self.plan_p0[None], self.plan.positions])
-        a, b = t_from_v - self.plan_t0_v, t_to_v - self.plan_t0_v
-        return np.array([np.interp(b, times, points[:, k]) - np.interp(a, times, points[:, k]) for k in range(3)])
+        return np.array([np.interp(dt, times, points[:, k]) for k in range(3)])
 
     def reference(self, t_v: float) -> tuple[np.ndarray, np.ndarray] | None:
         """Position and velocity of the plan in force at vehicle time ``t_v`` (NED m, m/s), or None.
@@ -147,9 +150,5 @@ class Executor:
         if self.plan is None:
             return None
         dt = t_v - self.plan_t0_v
-        tau = self.cfg.step_s
-        times = tau * np.arange(self.plan.positions.shape[0] + 1)
-        points = np.vstack([self.plan_p0[None], self.plan.positions])
-        position = np.array([np.interp(dt, times, points[:, k]) for k in range(3)])
         velocity = self._lag.velocity_at(self.plan.initial_velocity, self.plan.commands, dt)
-        return position, np.asarray(velocity, dtype=float)
+        return self._plan_position(dt), np.asarray(velocity, dtype=float)

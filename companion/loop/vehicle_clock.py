@@ -132,8 +132,9 @@ class VehicleClock:
 
     def sync_offset(self, t_s: float) -> float | None:
         """The TIMESYNC estimate of the offset at ``t_s`` (s); None when not in force."""
-        if self.disagrees or self._disagreeing or t_s - self._round_trips[-1].t_s > self.sync_window_s \
-                if self._round_trips else True:  # not while a disagreement is pending
+        if not self._round_trips or self.disagrees or self._disagreeing:  # none, set aside, or a disagreement pending
+            return None
+        if t_s - self._round_trips[-1].t_s > self.sync_window_s:  # the answers stopped
             return None
         return self._fitted(t_s)
 
@@ -189,16 +190,16 @@ class VehicleClock:
             return None
         rtt_cap = min(rt.rtt_s for rt in recent) + _RTT_SLACK_S
         good = [rt for rt in recent if rt.rtt_s <= rtt_cap]
+        best = min(reversed(good), key=lambda rt: rt.rtt_s)  # the newest of the shortest
+        without_drift = (best.t_s, best.offset_s, 0.0)
         t = np.array([rt.t_s for rt in good]) - t_now
         if len(good) < 2 or t[-1] - t[0] < _MIN_FIT_SPAN_S:
-            best = min(reversed(good), key=lambda rt: rt.rtt_s)  # the newest of the shortest
-            return (best.t_s, best.offset_s, 0.0)
+            return without_drift
         base = good[-1].offset_s
         y = np.array([rt.offset_s - base for rt in good])  # small numbers: link times are ~1e9 s
         slope, intercept = np.polyfit(t, y, 1)
         if not (math.isfinite(slope) and abs(slope) <= _MAX_DRIFT):
-            best = min(reversed(good), key=lambda rt: rt.rtt_s)
-            return (best.t_s, best.offset_s, 0.0)
+            return without_drift
         return (t_now, base + float(intercept), float(slope))
 
     def _check_agreement(self, t_now: float) -> None:
