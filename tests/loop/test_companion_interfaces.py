@@ -7,18 +7,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.loop.app import Companion
 from companion.loop.config import load_scenario
 from companion.loop.records import LoopMode, PlanStatus, status_counts
-from companion.mavlink.link import Received
 from companion.mavlink.offboard import OffboardSequencer
-
-
-def _received(msg, src=(1, 1), t_s=1.0) -> Received:
-    mav = mavlink2.MAVLink(None, *src)
-    raw = bytes(msg.pack(mav))
-    return Received(t_s, mav.parse_buffer(raw)[0], raw)
-
-
-def _heartbeat():
-    return mavlink2.MAVLink_heartbeat_message(2, 12, 157, 50593792, 4, 3)  # PX4, armed, AUTO.LOITER
+from tests.support.inbound import px4_heartbeat, received
 
 
 class _Recording(OffboardSequencer):
@@ -37,10 +27,10 @@ def _home(alt_mm: int):
 def test_that_the_injected_sequencer_gets_the_autopilots_home_altitude_and_no_one_elses():
     seq = _Recording()
     companion = Companion(load_scenario("configs/antipodal.toml"), sequencer=seq)
-    companion.handle(_received(_home(12_000)))  # before the autopilot is known: ignored
-    companion.handle(_received(_heartbeat()))
-    companion.handle(_received(_home(488_500)))
-    companion.handle(_received(_home(1_000), src=(7, 1)))  # another system's home
+    companion.handle(received(_home(12_000)))  # before the autopilot is known: ignored
+    companion.handle(received(px4_heartbeat()))
+    companion.handle(received(_home(488_500)))
+    companion.handle(received(_home(1_000), src=(7, 1)))  # another system's home
     assert companion.sequencer is seq and companion.autopilot == (1, 1)
     assert seq.home == [488.5]
 

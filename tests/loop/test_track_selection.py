@@ -10,7 +10,7 @@ from companion.loop.app import Companion
 from companion.loop.config import load_scenario
 from companion.loop.planning import InlinePlanning
 from companion.loop.track_selection import choose, confidence_radius, rank_by_risk
-from companion.mavlink.link import Received
+from tests.support.inbound import received
 
 
 def test_that_tracks_rank_by_predicted_clearance_then_time_of_closest_approach():
@@ -33,12 +33,6 @@ def test_that_tracks_rank_by_predicted_clearance_then_time_of_closest_approach()
     assert chosen.tolist() == [2, 3] and rest.tolist() == [1, 0]
 
 
-def _received(msg, src, t_s, link: str = "autopilot") -> Received:
-    mav = mavlink2.MAVLink(None, *src)
-    raw = bytes(msg.pack(mav))
-    return Received(t_s, mav.parse_buffer(raw)[0], raw, link)
-
-
 def test_that_two_hundred_tracks_are_cut_to_the_limit_with_the_close_one_kept_and_the_rest_reported():
     scenario = load_scenario("configs/antipodal.toml")
     jobs = []
@@ -56,11 +50,11 @@ def test_that_two_hundred_tracks_are_cut_to_the_limit_with_the_close_one_kept_an
     sent_setpoints = 0
     for i in range(8):
         t = 0.05 * i
-        companion.handle(_received(hb, (1, 1), t))
-        companion.handle(_received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), 0, 0, -5, 0, 0, 0), (1, 1), t))
+        companion.handle(received(hb, (1, 1), t))
+        companion.handle(received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), 0, 0, -5, 0, 0, 0), (1, 1), t))
         for k, p in enumerate(far):
-            companion.handle(_received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), *p, 0, 0, 0), (30 + k, 198), t, "obstacles1"))
-        companion.handle(_received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), 2.0, 0.2, -5, 0, 0, 0), (20, 197), t, "obstacles1"))
+            companion.handle(received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), *p, 0, 0, 0), (30 + k, 198), t, "obstacles1"))
+        companion.handle(received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), 2.0, 0.2, -5, 0, 0, 0), (20, 197), t, "obstacles1"))
         out = companion.tick(t)
         texts += [m.text for m in out if m.get_type() == "STATUSTEXT"]
         sent_setpoints += sum(m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" for m in out)

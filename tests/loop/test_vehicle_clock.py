@@ -9,7 +9,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.loop.app import CLOCK_DISAGREES_TEXT, Companion
 from companion.loop.config import load_scenario
 from companion.loop.vehicle_clock import VehicleClock, link_ns
-from companion.mavlink.link import Received
+from tests.support.inbound import px4_heartbeat, received
 
 EPOCH = 1_764_633_600.0  # link time as a real link has it: Unix seconds
 
@@ -115,21 +115,15 @@ def test_that_the_arrival_bound_takes_over_when_answers_stop():
 # ---------------------------------------------------------------------------- the companion's side
 
 
-def _received(msg, src=(1, 1), t_s=EPOCH) -> Received:
-    mav = mavlink2.MAVLink(None, *src)
-    raw = bytes(msg.pack(mav))
-    return Received(t_s, mav.parse_buffer(raw)[0], raw)
-
-
-def _heartbeat():
-    return mavlink2.MAVLink_heartbeat_message(2, 12, 157, 50593792, 4, 3)
+def _received(msg, src=(1, 1), t_s=EPOCH):
+    return received(msg, src, t_s)
 
 
 def test_that_the_companion_answers_the_autopilots_timesync_at_once_and_no_one_elses():
     companion = Companion(load_scenario("configs/antipodal.toml"))
     request = mavlink2.MAVLink_timesync_message(0, 8_048_000_000)
     assert companion.handle(_received(request)) == []  # the autopilot is not known yet
-    companion.handle(_received(_heartbeat()))
+    companion.handle(_received(px4_heartbeat()))
     (answer,) = companion.handle(_received(request, t_s=EPOCH + 0.25))
     assert answer.get_type() == "TIMESYNC" and answer.ts1 == 8_048_000_000 and answer.tc1 == link_ns(EPOCH + 0.25)
     assert companion.handle(_received(request, src=(7, 1))) == []  # another system's request
@@ -143,14 +137,14 @@ def test_that_the_companion_asks_the_autopilot_at_timesync_hz_and_never_before_i
         path.write_text(text)
         companion = Companion(load_scenario(path))
         assert not any(m.get_type() == "TIMESYNC" for m in companion.tick(EPOCH))
-        companion.handle(_received(_heartbeat()))
+        companion.handle(_received(px4_heartbeat()))
         sent = [m for k in range(1, 51) for m in companion.tick(EPOCH + 0.05 * k) if m.get_type() == "TIMESYNC"]
         assert len(sent) == expected and all(m.tc1 == 0 for m in sent)
 
 
 def test_that_a_companion_whose_autopilot_answers_on_another_clock_says_so_once():
     companion = Companion(load_scenario("configs/antipodal.toml"))
-    companion.handle(_received(_heartbeat()))
+    companion.handle(_received(px4_heartbeat()))
     texts = []
     for k in range(200):
         t = EPOCH + 0.05 * k
