@@ -330,12 +330,15 @@ class Companion:
         said: Outbox = []
         lead = self.plan_lead_s()
         velocity = self.perception.drone.state.velocity
+        v0 = self.executor.initial_velocity(velocity, t_v + lead)
+        if self.loop.initial_velocity == "estimate":   # anchored on the estimate, changed as the plan in force changes it
+            v0 = velocity + (v0 - self.executor.initial_velocity(velocity, t_v))
         job = self.builder.build(
             seq=self._replans_asked,
             t_s=t_s,
             t_v=t_v,
             perception=self.perception,
-            initial_velocity=self.executor.initial_velocity(velocity, t_v + lead),
+            initial_velocity=v0,
             warm_start=self.executor.plan,
             lead_s=lead,
             shift=self.executor.displacement(t_v, t_v + lead, velocity) if lead > 0.0 else None,

@@ -143,7 +143,11 @@ class LoopConfig:
         so re-filtering them as independent measurements would be overconfident), and
         the filter's covariance while none is reported; ``"estimate"`` always uses the
         companion filter's covariance; ``"predicted"`` uses its open-loop prediction.
-    drone_cov_floor_m2 : isotropic floor added to the drone's planning covariance, m^2.
+    tracking_margin_m2 : isotropic covariance added to the drone's in the planner's safety rows only
+        (:attr:`~companion.core.planner.request.PlanRequest.margin_cov`), m^2, in [0, 100]: how far the
+        vehicle strays from a plan before the next replan starts from where it really is
+        (measured against PX4: 0.1 to 0.27 m, docs/PX4.md). Not in the goal cost's metric and
+        not in the realised contour of touch, which is judged on the estimate alone.
     max_constrained_tracks : most obstacle tracks one replan constrains, in [1, 64]; the riskiest
         are chosen (:mod:`companion.loop.track_selection`), the rest counted and reported.
     max_plan_age_s : link seconds after its request past which a plan is no longer flown
@@ -165,7 +169,8 @@ class LoopConfig:
     estimate_timeout_s: float = 0.5
     obstacle_radius_m: float = 0.5
     drone_covariance: str = "reported"
-    drone_cov_floor_m2: float = 0.0
+    tracking_margin_m2: float = 0.0
+    initial_velocity: str = "plan"
     max_plan_age_s: float = 1.0
     max_constrained_tracks: int = 8
     setpoint_kind: str = "velocity"
@@ -178,8 +183,9 @@ class LoopConfig:
         set_("estimate_timeout_s", check.number("estimate_timeout_s", self.estimate_timeout_s, positive=True, hi=60.0))
         set_("obstacle_radius_m", check.number("obstacle_radius_m", self.obstacle_radius_m, lo=0.0, hi=100.0))
         check.choice("drone_covariance", self.drone_covariance, ("reported", "estimate", "predicted"))
-        set_("drone_cov_floor_m2", check.number("drone_cov_floor_m2", self.drone_cov_floor_m2, lo=0.0, hi=100.0))
+        set_("tracking_margin_m2", check.number("tracking_margin_m2", self.tracking_margin_m2, lo=0.0, hi=100.0))
         check.choice("setpoint_kind", self.setpoint_kind, ("velocity", "position_velocity"))
+        check.choice("initial_velocity", self.initial_velocity, ("plan", "estimate"))
         set_("max_plan_age_s", check.number("max_plan_age_s", self.max_plan_age_s, positive=True, hi=10.0))
         set_("plan_lead_max_s", check.number("plan_lead_max_s", self.plan_lead_max_s, lo=0.0, hi=1.0))
         set_("timesync_hz", check.number("timesync_hz", self.timesync_hz, lo=0.0, hi=50.0))

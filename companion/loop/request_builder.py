@@ -141,20 +141,21 @@ class RequestBuilder:
     # ------------------------------------------------------------------ estimates
 
     def drone_covariances(self, perception: Perception, t_v: float) -> tuple[np.ndarray, np.ndarray]:
-        """The drone's planning covariance now (3, 3) and over the horizon (N, 3, 3), m^2.
+        """The drone's covariance now (3, 3) and over the horizon (N, 3, 3), m^2.
 
-        ``[companion] drone_covariance`` picks the source (see :class:`~companion.loop.config.LoopConfig`);
-        ``drone_cov_floor_m2`` is added to both.
+        ``[companion] drone_covariance`` picks the source (see :class:`~companion.loop.config.LoopConfig`).
+        The tracking margin (``tracking_margin_m2``) is not in them: the request carries it
+        apart (:attr:`~companion.core.planner.request.PlanRequest.margin_cov`), so the
+        realised contour of touch is judged on the estimate alone.
         """
         n, tau = self.cfg.horizon_steps, self.cfg.step_s
-        floor = self.loop.drone_cov_floor_m2 * np.eye(3)
         est = perception.drone.state
         if self.loop.drone_covariance == "reported" and perception.reported_cov is not None:
-            cov_now = perception.reported_cov + floor
+            cov_now = perception.reported_cov
         else:
-            cov_now = est.position_cov + floor
+            cov_now = est.position_cov
         if self.loop.drone_covariance == "predicted":
-            covs = perception.drone.predict_position_covariances(t_v, np.zeros((n, 3)), tau) + floor
+            covs = perception.drone.predict_position_covariances(t_v, np.zeros((n, 3)), tau)
         else:
             covs = np.broadcast_to(cov_now, (n, 3, 3)).copy()
         return cov_now, covs
@@ -193,7 +194,8 @@ class RequestBuilder:
         states = {k: tracker.state(k) for k in keys} if len(keys) > self.loop.max_constrained_tracks \
             or self.scenario.walls else {}  # read once: 200 tracks cost about 5 ms per pass
         near, beyond = self._split_beyond_walls(keys, states, perception, t0)
-        constrained, left_out = self._select(near, states, t0, position, initial_velocity, cov_now)
+        margin = self.loop.tracking_margin_m2 * np.eye(3)
+        constrained, left_out = self._select(near, states, t0, position, initial_velocity, cov_now + margin)
         now_left_out = self._estimates_now(left_out + beyond, states, t_v)
         means, covs, radii, now_pos, now_cov = [], [], [], {}, {}
         for key in constrained:
@@ -222,6 +224,7 @@ class RequestBuilder:
             walls_normal=self.scenario.walls_normal,
             walls_offset=self.scenario.walls_offset,
             upper_bound_mask=np.array(leading, dtype=bool),
+            margin_cov=margin if self.loop.tracking_margin_m2 > 0.0 else None,
         )
         return ReplanJob(
             seq=seq,

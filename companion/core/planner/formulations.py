@@ -290,7 +290,7 @@ class Formulation:
 
     def wall_upper(self, request: PlanRequest) -> np.ndarray:
         """Right-hand sides (W, N) of the wall rows ``a.p_i <= b - r sqrt(a' S_i a) - R_drone``."""
-        spread = np.sqrt(np.einsum("wk,nkl,wl->wn", request.walls_normal, request.drone_covs, request.walls_normal))
+        spread = np.sqrt(np.einsum("wk,nkl,wl->wn", request.walls_normal, request.safety_covs, request.walls_normal))
         upper = request.walls_offset[:, None] - self.wall_row_radius * spread - self.drone_radius_m
         return upper - self.wall_row_backoff_m if self.wall_row_backoff_m else upper
 
@@ -334,7 +334,7 @@ class Hyperplane(Formulation):
     bounds_overlap = True
 
     def rows(self, request, positions, lam=None):
-        rows, _ = hyperplane_rows(positions, request.drone_covs, request.obstacle_means, request.obstacle_covs,
+        rows, _ = hyperplane_rows(positions, request.safety_covs, request.obstacle_means, request.obstacle_covs,
                                   self._radius_sum(request), self.r_min, self.r_max, self.separator(request, positions))
         return rows
 
@@ -347,7 +347,7 @@ class Paper(Formulation):
     bounds_overlap = True
 
     def rows(self, request, positions, lam):
-        return paper_rows(positions, lam, request.drone_covs, request.obstacle_means, request.obstacle_covs,
+        return paper_rows(positions, lam, request.safety_covs, request.obstacle_means, request.obstacle_covs,
                           self._radius_sum(request), self.r_min, self.r_max)
 
     def initial_lam(self, request, positions):
@@ -381,14 +381,14 @@ class Bhattacharyya(Formulation):
     name = "bhattacharyya"
 
     def rows(self, request, positions, lam=None):
-        return bhattacharyya_rows(positions, request.drone_covs, request.obstacle_means, request.obstacle_covs,
+        return bhattacharyya_rows(positions, request.safety_covs, request.obstacle_means, request.obstacle_covs,
                                   self._radius_sum(request), self.r_min)
 
     def recheck(self, request, positions, in_range):
         figs = self._exact(request, positions)
         ok = self._walls_hold(figs)
         if request.num_obstacles:
-            value, _ = signed_bhattacharyya(positions, request.drone_covs, request.obstacle_means,
+            value, _ = signed_bhattacharyya(positions, request.safety_covs, request.obstacle_means,
                                             request.obstacle_covs, self._radius_sum(request))
             margin = value - 0.5 * self.r_min**2
             ok &= bool(np.all(margin[in_range] >= -self.r_min * RECHECK_TOL_SIGMA))

@@ -85,6 +85,11 @@ class PlanRequest:
         Obstacles the ``c_max`` upper bound applies to (default: all in sensing range).
         The caller decides which obstacle the drone is following, e.g. the one leading
         the way to the goal in a corridor; the bound is released for the others.
+    margin_cov : (3, 3) array, optional
+        Tracking margin, m^2: added to the drone's covariance in the safety rows (obstacles
+        and walls) at every step, not in the cost's Mahalanobis metric. It stands for how far
+        the vehicle strays from a plan before the next replan, which the estimate's
+        covariance does not carry; ``safety_covs`` is the sum.
     """
 
     position: np.ndarray
@@ -97,6 +102,7 @@ class PlanRequest:
     walls_normal: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     walls_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
     upper_bound_mask: np.ndarray | None = None
+    margin_cov: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -143,15 +149,23 @@ class PlanRequest:
             mask = mask.copy()
         mask.setflags(write=False)
         set_("upper_bound_mask", mask)
+        if self.margin_cov is None:
+            set_("margin_cov", _array("margin_cov", np.zeros((3, 3)), (3, 3)))
+            set_("safety_covs", covs)
+        else:
+            margin = _array("margin_cov", self.margin_cov, (3, 3))
+            _check_covariances("margin_cov", margin[None] + np.eye(3)[None] * 1e-12)   # PSD: zero is allowed
+            set_("margin_cov", margin)
+            set_("safety_covs", _array("safety_covs", covs + margin, (n, 3, 3)))
 
     @cached_property
     def covariance_pairs(self) -> CovariancePairs:
-        """Drone and obstacle covariances as validated pairs over (P, N), built once per request.
+        """Drone (with the tracking margin) and obstacle covariances as validated pairs over (P, N), built once per request.
 
         Every minmax of this request (each SCP iterate's rows, the exact recheck) reuses
         them instead of validating the covariances again.
         """
-        return CovariancePairs.from_arrays(np.broadcast_to(self.drone_covs[None], self.obstacle_covs.shape),
+        return CovariancePairs.from_arrays(np.broadcast_to(self.safety_covs[None], self.obstacle_covs.shape),
                                            self.obstacle_covs, validated=True)   # checked in __post_init__
 
     @property

@@ -1,0 +1,110 @@
+"""The tracking margin (safety rows only) and the initial velocity anchored on the estimate."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.core.planner import Planner, PlanRequest
+from companion.errors import ConfigError, InputError
+from companion.loop.app import Companion
+from companion.loop.config import load_scenario
+from tests.core.test_planner_scp import exact_contour, scenario_one
+from tests.loop.test_request_gating import SCENARIO, HeldPlanner
+from tests.support.inbound import received
+
+MARGIN = 0.04 * np.eye(3)
+
+
+def test_that_the_margin_widens_the_safety_rows_only():
+    cfg, req = scenario_one()
+    widened = dataclasses.replace(req, margin_cov=MARGIN)
+    np.testing.assert_array_equal(widened.safety_covs, req.drone_covs + MARGIN)
+    np.testing.assert_array_equal(widened.drone_covs, req.drone_covs)
+    plain, kept_apart = Planner(cfg).solve(req), Planner(cfg).solve(widened)
+    assert plain.status == kept_apart.status == "optimal"
+    # judged on the drone's own covariance, the widened plan keeps its contours further apart
+    assert exact_contour(req, plain, cfg.drone_radius_m).min() == pytest.approx(cfg.c_min, abs=0.01)
+    assert exact_contour(req, kept_apart, cfg.drone_radius_m).min() > cfg.c_min + 0.05
+    # and its own promise is made on the widened covariances
+    assert kept_apart.contour_of_touch.min() >= cfg.c_min - 1e-3
+
+
+def test_that_the_margin_leaves_the_goal_cost_alone():
+    cfg, req = scenario_one()
+    free = dataclasses.replace(req, obstacle_means=np.zeros((0, 20, 3)), obstacle_covs=np.zeros((0, 20, 3, 3)),
+                               obstacle_radii=np.zeros(0), upper_bound_mask=None)
+    a = Planner(cfg).solve(free)
+    b = Planner(cfg).solve(dataclasses.replace(free, margin_cov=MARGIN))
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-9)
+
+
+@pytest.mark.parametrize("margin, word", [(np.diag([0.04, -0.01, 0.04]), "positive definite"),
+                                          (np.array([[0.04, 0.01, 0], [0, 0.04, 0], [0, 0, 0.04]]), "symmetric"),
+                                          (np.zeros((2, 2)), "shape")])
+def test_that_a_bad_margin_is_refused_by_name(margin, word):
+    _, req = scenario_one()
+    with pytest.raises(InputError, match=f"margin_cov.*{word}"):
+        dataclasses.replace(req, margin_cov=margin)
+
+
+def _companion(**loop) -> tuple[Companion, HeldPlanner]:
+    scenario = load_scenario(SCENARIO)
+    scenario = dataclasses.replace(scenario, loop=dataclasses.replace(scenario.loop, **loop))
+    service = HeldPlanner(Planner(scenario.planner))
+    return Companion(scenario, planning=service), service
+
+
+def _fly(companion: Companion, service: HeldPlanner, seconds: float = 2.0) -> list:
+    """Poses flying north at 1 m/s (LOCAL_POSITION_NED) at 20 Hz; every job is answered at the next tick."""
+    jobs, t = [], 0.0
+    while t < seconds:
+        for msg in (mavlink2.MAVLink_heartbeat_message(2, 12, 157 | 128, 6 << 16, 4, 3),
+                    mavlink2.MAVLink_local_position_ned_message(int(t * 1000), t, 0.0, -5.0, 1.0, 0.0, 0.0)):
+            companion.handle(received(msg, t_s=t))
+        companion.tick(t)
+        if service.waiting:
+            if service.waiting[0] not in jobs:
+                jobs.append(service.waiting[0])
+            elif t - service.waiting[0].t_link_s >= 0.05 - 1e-9:
+                service.answer(solve=True)
+        t = round(t + 0.05, 2)
+    return jobs
+
+
+def test_that_the_request_carries_the_margin_and_the_realised_contour_is_judged_without_it():
+    companion, service = _companion(tracking_margin_m2=0.04)
+    jobs = _fly(companion, service, 1.0)
+    assert jobs
+    for job in jobs:
+        np.testing.assert_array_equal(job.request.margin_cov, MARGIN)
+        np.testing.assert_allclose(job.request.safety_covs, job.request.drone_covs + MARGIN)
+        np.testing.assert_array_equal(job.drone_cov, job.request.drone_covs[0])   # the estimate's, no margin
+    plain, service = _companion()
+    assert not np.any(_fly(plain, service, 1.0)[0].request.margin_cov)
+
+
+def test_that_the_initial_velocity_follows_the_plan_chain_or_the_estimate_as_configured():
+    chained, service = _companion()
+    v_plan = [j.request.velocity for j in _fly(chained, service)]
+    anchored, service = _companion(initial_velocity="estimate")
+    jobs = _fly(anchored, service)
+    lead = [j.t_vehicle_s - anchored.vehicle_time(j.t_link_s) for j in jobs]
+    # the estimate (1 m/s north, filtered) moved by what the plan in force does over the lead
+    estimate_now = [j.drone_velocity for j in jobs]
+    assert any(abs(a[0] - b[0]) > 0.05 for a, b in zip(v_plan[1:], estimate_now[1:]))   # the chain strays from it
+    for job, est, dt in zip(jobs, estimate_now, lead):
+        if dt == 0.0:
+            np.testing.assert_allclose(job.request.velocity, est, atol=1e-12)
+    assert max(np.linalg.norm(j.request.velocity - e) for j, e in zip(jobs, estimate_now)) < 0.5
+
+
+def test_that_the_loop_settings_are_checked_by_name():
+    scenario = load_scenario(SCENARIO)
+    with pytest.raises(ConfigError, match="initial_velocity"):
+        dataclasses.replace(scenario.loop, initial_velocity="measured")
+    with pytest.raises(ConfigError, match="tracking_margin_m2"):
+        dataclasses.replace(scenario.loop, tracking_margin_m2=-0.1)
