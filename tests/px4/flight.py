@@ -183,13 +183,10 @@ def judge_replay(r: dict) -> list[str]:
     return []
 
 
-def judge_targets(r: dict) -> list[str]:
-    """The missed performance targets of issue 13 (empty when all were met): takeoff to the
-    requested altitude within 0.3 m (SIH's true height), the realised contour of touch never
-    below the scenario's ``c_min``, and the goal within 25 s of OFFBOARD."""
+def judge_encounter(r: dict) -> list[str]:
+    """The missed encounter targets of issue 13 (empty when met): the realised contour of touch
+    never below the scenario's ``c_min``, and the goal within 25 s of OFFBOARD."""
     bad = []
-    if r.get("takeoff_height_m") is None or abs(r["takeoff_height_m"] - TAKEOFF_ALT_M) > 0.3:
-        bad.append(f"takeoff height {r.get('takeoff_height_m')} m, asked {TAKEOFF_ALT_M} m")
     rc = r.get("companion_report", {})
     if rc.get("min_realised_contour") is None or rc["min_realised_contour"] < r.get("c_min", 0.90) - 1e-9:
         bad.append(f"realised contour {rc.get('min_realised_contour')} below c_min")
@@ -198,9 +195,19 @@ def judge_targets(r: dict) -> list[str]:
     return bad
 
 
+def judge_takeoff(r: dict) -> list[str]:
+    """The missed takeoff target of issue 13 (empty when met): the requested altitude within
+    0.3 m in SIH's truth. It measures PX4's height estimate as much as the companion (PX4
+    holds its own estimate, which is up to 1.1 m off SIH's truth after the climb; docs/PX4.md)."""
+    if r.get("takeoff_height_m") is None or abs(r["takeoff_height_m"] - TAKEOFF_ALT_M) > 0.3:
+        return [f"takeoff height {r.get('takeoff_height_m')} m in truth "
+                f"({r.get('takeoff_height_px4_estimate_m')} m in PX4's estimate), asked {TAKEOFF_ALT_M} m"]
+    return []
+
+
 def judge(r: dict) -> list[str]:
-    """All failed checks of a run: safety and hand-back, replay, and the performance targets."""
-    return judge_safety(r) + judge_replay(r) + judge_targets(r)
+    """All failed checks of a run: safety and hand-back, replay, the encounter and the takeoff."""
+    return judge_safety(r) + judge_replay(r) + judge_encounter(r) + judge_takeoff(r)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -6,14 +6,12 @@ own system ids to the companion's obstacle link over loopback (:mod:`tests.px4.w
 checks against SIH's ground truth and replays the recorded tlog.
 
 Asserted: no collision in truth, the vehicle holding (AUTO.LOITER) without a failsafe
-after the companion stops, and ``companion replay`` reproducing every recorded command
-(difference 0 m/s). Printed, not asserted: issue 13's performance targets (takeoff within
-0.3 m of 5 m in SIH's truth, realised contour of touch never below ``c_min``, goal within
-25 s of OFFBOARD). On the quiet 2-core machine five runs in a row met all of them once:
-the true takeoff height ranged from 4.23 to 5.98 m (PX4 ends its takeoff on its own
-estimate), and the goal time and contour vary from run to run (docs/PX4.md has the table). Asserting them would fail
-CI on most runs for reasons issue 13 keeps open. Everything started is stopped; a few
-minutes in all.
+after the companion stops, ``companion replay`` reproducing every recorded command
+(difference 0 m/s), the realised contour of touch never below ``c_min`` and the goal within
+25 s of OFFBOARD (met in five runs in a row on the quiet machine, docs/PX4.md). Printed, not
+asserted: the takeoff within 0.3 m of 5 m in SIH's truth, which PX4's own height estimate
+decides (it was 0.3 to 1.1 m off SIH's truth at the end of the takeoff in three of those
+five runs). Everything started is stopped; a few minutes in all.
 """
 
 from __future__ import annotations
@@ -22,7 +20,7 @@ import json
 
 import pytest
 
-from tests.px4.flight import fly_once, judge_replay, judge_safety, judge_targets
+from tests.px4.flight import fly_once, judge_encounter, judge_replay, judge_safety, judge_takeoff
 from tests.px4.sitl import REPO, sitl_dir
 
 pytestmark = pytest.mark.px4
@@ -36,6 +34,6 @@ def test_that_the_companion_flies_px4_sitl_through_the_antipodal_encounter_safel
     result = fly_once(tmp_path / "flight", SCENARIO)
     print(json.dumps(result, indent=1, default=str))
     assert result.get("world_errors") == [], result
-    missed = judge_targets(result)
-    print("issue 13 targets:", "all met" if not missed else "NOT MET: " + "; ".join(missed))
-    assert judge_safety(result) + judge_replay(result) == [], json.dumps(result, default=str)
+    missed = judge_takeoff(result)
+    print("takeoff target:", "met" if not missed else "NOT MET: " + "; ".join(missed))
+    assert judge_safety(result) + judge_replay(result) + judge_encounter(result) == [], json.dumps(result, default=str)
