@@ -113,13 +113,18 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
         return
     # takeoff: the height the vehicle holds after the takeoff, as SIH's truth has it: the mean
     # true height over the last TAKEOFF_WINDOW_S before OFFBOARD (the companion leaves PX4 in
-    # Hold for [offboard] takeoff_settle_s after AUTO.TAKEOFF ends), and PX4's own estimate then
+    # Hold for [offboard] takeoff_settle_s after AUTO.TAKEOFF ends), and PX4's own estimate then,
+    # above what it read on the ground (PX4's local z is 0 at its EKF origin, not at the ground:
+    # it read -0.2 to +0.6 m on the ground in SIH)
     window = (truth_t >= obs.offboard_t - TAKEOFF_WINDOW_S) & (truth_t <= obs.offboard_t)
     result["takeoff_height_m"] = round(float(-truth_p[window, 2].mean()), 3) if window.any() else None
     est_t = np.array([t for t, _ in obs.estimate])
     est_p = np.array([p for _, p in obs.estimate]).reshape(-1, 3)
+    lifted = truth_t[-truth_p[:, 2] > 0.05]
+    ground = est_t < (lifted[0] - 0.5 if lifted.size else -np.inf)
     est_window = (est_t >= obs.offboard_t - TAKEOFF_WINDOW_S) & (est_t <= obs.offboard_t)
-    result["takeoff_height_px4_estimate_m"] = round(float(-est_p[est_window, 2].mean()), 3) if est_window.any() else None
+    result["takeoff_height_px4_estimate_m"] = round(float(-(est_p[est_window, 2].mean() - est_p[ground, 2].mean())), 3) \
+        if est_window.any() and ground.any() else None
     # collisions in truth: obstacles' true positions at the truth sample times
     moving = truth_t - obs.offboard_t
     clear = []
@@ -198,7 +203,7 @@ def judge_encounter(r: dict) -> list[str]:
 def judge_takeoff(r: dict) -> list[str]:
     """The missed takeoff target of issue 13 (empty when met): the requested altitude within
     0.3 m in SIH's truth. It measures PX4's height estimate as much as the companion (PX4
-    holds its own estimate, which is up to 1.1 m off SIH's truth after the climb; docs/PX4.md)."""
+    holds its own estimate, which was up to 1.5 m off SIH's truth after the climb; docs/PX4.md)."""
     if r.get("takeoff_height_m") is None or abs(r["takeoff_height_m"] - TAKEOFF_ALT_M) > 0.3:
         return [f"takeoff height {r.get('takeoff_height_m')} m in truth "
                 f"({r.get('takeoff_height_px4_estimate_m')} m in PX4's estimate), asked {TAKEOFF_ALT_M} m"]
