@@ -61,6 +61,7 @@ class ConstantVelocityFilter:
         self._label = label
         self._kf = KalmanFilter(dim_x=STATE_DIM, dim_z=3)
         self._kf.x = np.zeros(STATE_DIM)
+        self._fq: tuple[float, np.ndarray | None, np.ndarray | None] = (math.nan, None, None)
         self.t_s: float | None = None
         """Time of the current estimate, s (``None`` before the first measurement)."""
 
@@ -104,24 +105,27 @@ class ConstantVelocityFilter:
             return UpdateResult(True, Reason.REINITIALISED, t_s)
 
         kf = self._kf
-        x0, P0 = kf.x, kf.P
-        kf.predict(F=transition_matrix(dt), Q=process_noise(dt, self._q))  # x = F x;  P = F P F' + Q
-
-        y = m.z - m.H @ kf.x  # y = z - H x
-        S = m.H @ kf.P @ m.H.T + m.R  # S = H P H' + R
-        nis = float(y @ np.linalg.solve(S, y))  # NIS = y' S^-1 y
+        x0, P0 = kf.x, kf.P  # filterpy replaces x and P with new arrays: these stay the estimate at self.t_s
+        F, Q = self._model(dt)
+        kf.predict(F=F, Q=Q)  # x = F x;  P = F P F' + Q
+        kf.update(m.z, R=m.R, H=m.H)  # Joseph form, see module docstring; keeps y = z - H x and S^-1
+        nis = float(kf.y @ kf.SI @ kf.y)  # NIS = y' S^-1 y, S = H P H' + R of the prediction
         dof = m.z.size
         if self._gate is not None and not nis <= self._gate[dof]:
-            kf.x, kf.P = x0, P0  # undo the prediction: the estimate stays at self.t_s
+            kf.x, kf.P = x0, P0  # undo the prediction and the update: the estimate stays at self.t_s
             return self._reject(
                 t_s, Reason.GATED, f"NIS {nis:.3g} > gate {self._gate[dof]:.3g} ({dof} dof)", nis, dof,
                 level=logging.INFO,
             )
-
-        kf.update(m.z, R=m.R, H=m.H)  # Joseph form, see module docstring
         kf.P = symmetrise(kf.P)
         self.t_s = t_s
         return UpdateResult(True, Reason.UPDATED, t_s, nis, dof)
+
+    def _model(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """``F(dt)`` and ``Q(dt)``, kept for the last ``dt`` (reports at a fixed rate repeat it; filterpy only reads them)."""
+        if self._fq[0] != dt:
+            self._fq = (dt, transition_matrix(dt), process_noise(dt, self._q))
+        return self._fq[1], self._fq[2]
 
     def predict_position(self, lags_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Position mean (N, 3) and covariance (N, 3, 3) at ``lags_s`` after the estimate."""

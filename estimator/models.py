@@ -121,21 +121,22 @@ def propagate_position(
     Parameters
     ----------
     mean, cov, lags_s, accel_noise_psd_m2ps3
-        As for :func:`propagate`.
+        As for :func:`propagate`; or stacked for K filters at once: ``mean`` (K, 6), ``cov``
+        (K, 6, 6), ``lags_s`` (K, N), each filter's numbers the same as alone.
 
     Returns
     -------
-    means : numpy.ndarray, shape (N, 3)
+    means : numpy.ndarray, shape (N, 3) or (K, N, 3)
         Position, m, NED.
-    covs : numpy.ndarray, shape (N, 3, 3)
+    covs : numpy.ndarray, shape (N, 3, 3) or (K, N, 3, 3)
         Position covariance, m^2.
     """
     tau = np.asarray(lags_s, dtype=float)
-    p, v = mean[:3], mean[3:]
-    Ppp, Ppv, Pvv = cov[:3, :3], cov[:3, 3:], cov[3:, 3:]
-    t = tau[:, None, None]
-    means = p + tau[:, None] * v
-    covs = Ppp + t * (Ppv + Ppv.T) + t**2 * Pvv + (accel_noise_psd_m2ps3 / 3.0) * t**3 * _I3
+    p, v = mean[..., None, :3], mean[..., None, 3:]
+    Ppp, Ppv, Pvv = cov[..., None, :3, :3], cov[..., None, :3, 3:], cov[..., None, 3:, 3:]
+    t = tau[..., None, None]
+    means = p + tau[..., None] * v
+    covs = Ppp + t * (Ppv + np.swapaxes(Ppv, -1, -2)) + t**2 * Pvv + (accel_noise_psd_m2ps3 / 3.0) * t**3 * _I3
     return means, covs
 
 

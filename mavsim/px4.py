@@ -122,6 +122,8 @@ class Commander:
         self.arming_delay_s = arming_delay_s
         self.offboard_reject_ack = offboard_reject_ack
         self.setpoint: OffboardSetpoint | None = None
+        self._parts_of: OffboardSetpoint | None = None   # the setpoint self._parts was worked out for
+        self._parts: tuple = ()
         self.last_setpoint_s = -math.inf
         self.hold_point = vehicle.position_ned_m.copy()
         self.takeoff_z = min(vehicle.position_ned_m[2], -params["MIS_TAKEOFF_ALT"])
@@ -283,17 +285,24 @@ class Commander:
         v[2] = min(max(v[2], -self.params["MPC_Z_VEL_MAX_UP"]), self.params["MPC_Z_VEL_MAX_DN"])
         return v
 
+    def _setpoint_parts(self, sp: OffboardSetpoint) -> tuple:
+        """Which fields of ``sp`` apply and their values with the ignored ones zeroed, worked out once per
+        setpoint (setpoints arrive at about 20 Hz, the physics steps at 100 Hz)."""
+        if self._parts_of is not sp:
+            pos_ok, vel_ok, acc_ok = (np.isfinite(sp.position_ned_m), np.isfinite(sp.velocity_ned_mps),
+                                      np.isfinite(sp.accel_ned_mps2))
+            self._parts = (pos_ok, vel_ok, acc_ok, np.where(pos_ok, sp.position_ned_m, 0.0),
+                           np.where(vel_ok, sp.velocity_ned_mps, 0.0), np.where(acc_ok, sp.accel_ned_mps2, 0.0))
+            self._parts_of = sp
+        return self._parts
+
     def _offboard(self, dt: float, vehicle: VehicleState) -> tuple[np.ndarray, float | None, float | None]:
         sp = self.setpoint
         assert sp is not None
         p = vehicle.position_ned_m
-        pos_ok = np.isfinite(sp.position_ned_m)
-        vel_ok = np.isfinite(sp.velocity_ned_mps)
-        acc_ok = np.isfinite(sp.accel_ned_mps2)
-        vel_ff = np.where(vel_ok, sp.velocity_ned_mps, 0.0)
-        self._acc_integrator = np.where(acc_ok, self._acc_integrator + np.where(acc_ok, sp.accel_ned_mps2, 0.0) * dt,
-                                        vehicle.velocity_ned_mps)
-        v = np.where(pos_ok, POS_GAIN_PER_S * (np.where(pos_ok, sp.position_ned_m, 0.0) - p) + vel_ff,
+        pos_ok, vel_ok, acc_ok, pos_sp, vel_ff, acc_sp = self._setpoint_parts(sp)
+        self._acc_integrator = np.where(acc_ok, self._acc_integrator + acc_sp * dt, vehicle.velocity_ned_mps)
+        v = np.where(pos_ok, POS_GAIN_PER_S * (pos_sp - p) + vel_ff,
                      np.where(vel_ok, vel_ff, np.where(acc_ok, self._acc_integrator, 0.0)))
         yaw = sp.yaw_rad if math.isfinite(sp.yaw_rad) else None
         rate = sp.yaw_rate_radps if math.isfinite(sp.yaw_rate_radps) else None

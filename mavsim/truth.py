@@ -60,6 +60,8 @@ class TruthRecorder:
         self.wall_n = np.array([w.normal_ned for w in scenario.walls]).reshape(-1, 3)
         self.wall_b = np.array([w.offset_m for w in scenario.walls])
         self.wall_min = np.full(len(self.wall_b), math.inf)  # min clearance (offset - n.p - r)
+        self._static_names = [f"static{i}" for i in range(len(self.static_rs))]
+        self._wall_names = [f"wall{i}" for i in range(len(self.wall_b))]
         self.contacts: list[_Contact] = []
         self._open: dict[tuple[str, str], _Contact] = {}
         self.goal_reached_t_s: float | None = None
@@ -85,11 +87,11 @@ class TruthRecorder:
         if len(self.static_rs):
             d = np.linalg.norm(self.static_c - p, axis=1)
             self.static_min = np.minimum(self.static_min, d)
-            self._contacts("static", [f"static{i}" for i in range(len(d))], d, d < self.static_rs, t_s)
+            self._contacts("static", self._static_names, d, d < self.static_rs, t_s)
         if len(self.wall_b):
             clearance = self.wall_b - self.wall_n @ p - self.sc.vehicle_radius_m
             self.wall_min = np.minimum(self.wall_min, clearance)
-            self._contacts("wall", [f"wall{i}" for i in range(len(clearance))], clearance, clearance < 0, t_s)
+            self._contacts("wall", self._wall_names, clearance, clearance < 0, t_s)
         if self.sc.goal_ned_m is not None:
             e = p - self.sc.goal_ned_m
             g = math.sqrt(float(e @ e))

@@ -197,14 +197,12 @@ class RequestBuilder:
         margin = self.loop.tracking_margin_m2 * np.eye(3)
         constrained, left_out = self._select(near, states, t0, position, initial_velocity, cov_now + margin)
         now_left_out = self._estimates_now(left_out + beyond, states, t_v)
-        means, covs, radii, now_pos, now_cov = [], [], [], {}, {}
-        for key in constrained:
-            m, c = tracker.predict(key, times)
-            m0, c0 = tracker.predict(key, np.array([t_v]))
-            means.append(m)
-            covs.append(c)
-            radii.append(self.obstacle_radius(key))
-            now_pos[key], now_cov[key] = m0[0], c0[0]
+        # every constrained track now (t_v, column 0) and over the horizon, in one pass
+        predicted_means, predicted_covs = tracker.predict_many(constrained, np.concatenate([[t_v], times]))
+        means, covs = list(predicted_means[:, 1:]), list(predicted_covs[:, 1:])
+        radii = [self.obstacle_radius(key) for key in constrained]
+        now_pos = dict(zip(constrained, predicted_means[:, 0]))
+        now_cov = dict(zip(constrained, predicted_covs[:, 0]))
         for key, (m0, c0) in now_left_out.items():
             now_pos[key], now_cov[key] = m0, c0
         for s in self.scenario.static_obstacles:

@@ -318,6 +318,12 @@ def covariance_from_upper_triangle(values, *, what: str) -> np.ndarray | None | 
     return cov
 
 
+def _finite3(v: np.ndarray) -> bool:
+    """All three entries finite (on Python floats: a few times cheaper than ``np.all(np.isfinite(v))``)."""
+    x, y, z = v.tolist()
+    return math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
+
+
 def _quat_to_rot(q) -> np.ndarray | None:
     """Rotation matrix body -> local of a MAVLink quaternion (w, x, y, z); None if unusable."""
     w, x, y, z = (float(v) for v in q)
@@ -348,7 +354,7 @@ def decode_odometry(msg: mavlink2.MAVLink_odometry_message) -> PoseObservation |
     if int(msg.frame_id) not in LOCAL_FRAMES:
         return _reject(msg, f"frame_id {msg.frame_id} is not LOCAL_NED (1) or LOCAL_FRD (20)")
     position = np.array([msg.x, msg.y, msg.z], dtype=float)
-    if not np.all(np.isfinite(position)):
+    if not _finite3(position):
         return _reject(msg, f"non-finite position {position.tolist()}")
     t_s = int(msg.time_usec) * 1e-6
 
@@ -360,7 +366,7 @@ def decode_odometry(msg: mavlink2.MAVLink_odometry_message) -> PoseObservation |
         return _reject(msg, vel_cov)
 
     velocity: np.ndarray | None = np.array([msg.vx, msg.vy, msg.vz], dtype=float)
-    if not np.all(np.isfinite(velocity)):
+    if not _finite3(velocity):
         velocity, vel_cov = None, None
     else:
         child = int(msg.child_frame_id)
@@ -392,10 +398,10 @@ def decode_odometry(msg: mavlink2.MAVLink_odometry_message) -> PoseObservation |
 def decode_local_position_ned(msg: mavlink2.MAVLink_local_position_ned_message) -> PoseObservation | Rejected:
     """LOCAL_POSITION_NED to :class:`PoseObservation` (no covariance), or :class:`Rejected`."""
     position = np.array([msg.x, msg.y, msg.z], dtype=float)
-    if not np.all(np.isfinite(position)):
+    if not _finite3(position):
         return _reject(msg, f"non-finite position {position.tolist()}")
     velocity: np.ndarray | None = np.array([msg.vx, msg.vy, msg.vz], dtype=float)
-    if not np.all(np.isfinite(velocity)):
+    if not _finite3(velocity):
         velocity = None
     return PoseObservation(
         key=source_key(msg),

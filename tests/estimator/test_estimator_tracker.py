@@ -145,6 +145,28 @@ def test_that_predict_validates_times_and_keys():
         tr.state("nobody")
 
 
+def test_that_predicting_many_tracks_at_once_gives_each_track_s_own_numbers():
+    rng = np.random.default_rng(7)
+    tr = ObstacleTracker(TrackerConfig())
+    keys = [(101 + i, 1) for i in range(5)]
+    for k in range(8):
+        for i, key in enumerate(keys):
+            if k < 3 + i:   # tracks last heard at different times
+                tr.update(key, 0.1 * k + 0.01 * i, rng.normal(size=3) + [i, 0.1 * k, -5.0], None, R)
+    times = 1.0 + 0.3 * np.arange(12)
+    means, covs = tr.predict_many(keys, times)
+    assert means.shape == (5, 12, 3) and covs.shape == (5, 12, 3, 3)
+    for k, key in enumerate(keys):
+        m, c = tr.predict(key, times)
+        assert np.array_equal(means[k], m) and np.array_equal(covs[k], c)   # bit for bit
+    empty_m, empty_c = tr.predict_many([], times)
+    assert empty_m.shape == (0, 12, 3) and empty_c.shape == (0, 12, 3, 3)
+    with pytest.raises(UnknownTrackError):
+        tr.predict_many([keys[0], "nobody"], times)
+    with pytest.raises(EstimatorInputError, match="finite 1-D"):
+        tr.predict_many(keys, [np.nan])
+
+
 finite = st.floats(-1e4, 1e4, allow_nan=False)
 vec3 = st.lists(finite, min_size=3, max_size=3)
 spd = st.tuples(st.lists(st.floats(-1.0, 1.0), min_size=9, max_size=9), st.floats(1e-4, 10.0)).map(

@@ -381,3 +381,15 @@ def test_that_chance_constrained_methods_keep_their_promise_in_a_real_campaign()
         assert hit_while_planning == [], f"{m}: collision without a planner failure in episodes {hit_while_planning}"
         assert s.pair_step_frequency <= s.bound_phi_minus_r_min
     assert res.summary["deterministic"].share_pairs_below_c_min > res.summary["hyperplane"].share_pairs_below_c_min
+
+
+def test_that_the_promised_probability_is_scipy_stats_number_for_number():
+    from scipy.stats import chi2
+
+    from companion.offline.campaign.reliability import promised_probability
+
+    contours = np.concatenate([[-0.5, 0.0, 1e-300, 1e-12, 0.5, 0.9, 1.0 - 1e-16, 1.0, 1.5],
+                               np.random.default_rng(3).uniform(0.0, 1.0, 500)])
+    for c in contours:
+        expected = float(norm.cdf(-math.sqrt(chi2.ppf(min(max(c, 0.0), 1.0), 3))))
+        assert promised_probability(c) == expected, c

@@ -26,7 +26,7 @@ import logging
 import math
 from dataclasses import dataclass
 import numpy as np
-from scipy.stats import chi2, norm
+from scipy import special
 
 from companion.offline.campaign.jsonable import to_jsonable
 
@@ -42,8 +42,17 @@ def promise_bin(p: float) -> int:
 
 
 def promised_probability(contour: float) -> float:
-    """``Phi(-r(c))``, ``r(c) = sqrt(chi2_3.ppf(c))``: 1/2 for ``c = 0`` (overlap), 0 for ``c = 1``."""
-    return float(norm.cdf(-math.sqrt(chi2.ppf(min(max(contour, 0.0), 1.0), 3))))
+    """``Phi(-r(c))``, ``r(c) = sqrt(chi2_3.ppf(c))``: 1/2 for ``c = 0`` (overlap), 0 for ``c = 1``.
+
+    Written with the special functions scipy.stats evaluates for these two (``chi2_3.ppf(c)
+    = 2 gammaincinv(3/2, c)``, ``Phi = ndtr``): the same numbers without the distribution
+    objects' argument handling, which cost about 0.1 ms a call (tests/offline/test_campaign.py
+    checks them against scipy.stats).
+    """
+    c = min(max(float(contour), 0.0), 1.0)
+    if c >= 1.0:
+        return 0.0
+    return float(special.ndtr(-math.sqrt(2.0 * special.gammaincinv(1.5, c))))
 
 
 class PromiseTally:
