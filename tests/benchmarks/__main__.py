@@ -32,7 +32,7 @@ SUMMARY = (
     ("planner", "hyperplane speed-up over cvxpy"),
     ("overlap", "minmax batched, 10k 3-D pairs"),
     ("overlap", "max relative eta difference vs brentq"),
-    ("estimator", "tracker cycle: update 10 tracks + predict each N=40 (median)"),
+    ("estimator", "tracker cycle: update 10 tracks + predict all N=40 (median)"),
     ("campaign", "core-seconds per antipodal campaign episode (hyperplane)"),
 )
 

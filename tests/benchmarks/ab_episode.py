@@ -1,0 +1,80 @@
+"""Old code against new in one run: core-seconds per campaign episode, and whether the episodes' scores changed.
+
+Usage::
+
+    git worktree add /tmp/old <commit>
+    python -m tests.benchmarks.ab_episode /tmp/old . [--episodes 0,1,2,3] [--rounds 3]
+
+Each round runs the episodes (antipodal family, campaign seed 1, ``hyperplane``) in one fresh
+process per tree, the trees in alternating order, and reads the process's CPU time around each
+episode (``time.process_time``). It prints each tree's mean core-seconds, the ratio new / old,
+and a digest of each episode's score (SHA-256 of its JSON, every field but the solve times):
+equal digests mean the change left every simulated number as it was. Timings of a shared
+machine drift between runs; the ratio of one run is the figure to quote.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+_CHILD = r"""
+import dataclasses, hashlib, json, sys, time
+sys.path.insert(0, sys.argv[1])
+from companion.offline.campaign.run import EpisodeTask, run_episode
+out = []
+for index in [int(i) for i in sys.argv[2].split(",")]:
+    task = EpisodeTask(family="antipodal", seed=1, index=index, method="hyperplane")
+    c0 = time.process_time()
+    result = run_episode(task)
+    core = time.process_time() - c0
+    if result.error:
+        raise SystemExit(f"episode {index}: {result.error}")
+    score = dataclasses.asdict(result.score)
+    score.pop("solve_times_s", None)
+    out.append([core, hashlib.sha256(json.dumps(score, sort_keys=True, default=str).encode()).hexdigest()[:12]])
+print(json.dumps(out))
+"""
+
+TIMEOUT_S = 1800.0
+
+
+def run_tree(tree: Path, episodes: str) -> list[tuple[float, str]]:
+    """(core-seconds, score digest) of each episode, flown by the code in ``tree`` in a fresh process."""
+    proc = subprocess.run([sys.executable, "-c", _CHILD, str(tree), episodes], capture_output=True, text=True,
+                          cwd=tree, timeout=TIMEOUT_S)
+    if proc.returncode != 0:
+        raise SystemExit(f"{tree}: {proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else proc.returncode}")
+    return [(float(c), str(h)) for c, h in json.loads(proc.stdout.strip().splitlines()[-1])]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("old", type=Path, help="source tree of the old code (a git worktree)")
+    ap.add_argument("new", type=Path, help="source tree of the new code")
+    ap.add_argument("--episodes", default="0,1,2,3", help="episode indices (default 0,1,2,3)")
+    ap.add_argument("--rounds", type=int, default=3, help="alternating rounds (default 3)")
+    args = ap.parse_args(argv)
+    for tree in (args.old, args.new):
+        if not (tree / "companion" / "__init__.py").is_file():
+            print(f"ab_episode: {tree} is not a source tree of this project (no companion/__init__.py)", file=sys.stderr)
+            return 2
+    trees = [args.old.resolve(), args.new.resolve()]
+    runs: dict[Path, list] = {t: [] for t in trees}
+    for r in range(args.rounds):
+        for tree in trees if r % 2 == 0 else trees[::-1]:
+            runs[tree].append(run_tree(tree, args.episodes))
+    mean = {t: sum(c for run in runs[t] for c, _ in run) / sum(len(run) for run in runs[t]) for t in trees}
+    digests = {t: [h for _, h in runs[t][0]] for t in trees}
+    for t, label in zip(trees, ("old", "new")):
+        print(f"{label} {t}: {mean[t]:.3f} core-s per episode; scores {' '.join(digests[t])}")
+    print(f"new / old: {mean[trees[1]] / mean[trees[0]]:.3f}; scores "
+          f"{'identical' if digests[trees[0]] == digests[trees[1]] else 'DIFFER'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
