@@ -15,6 +15,7 @@ import logging
 import sys
 
 from companion.commands._argtypes import finite_number, non_negative_seconds, positive_number
+from companion.loop.records import describe_tracking
 from companion.offline.replay import replay
 
 logger = logging.getLogger(__name__)
@@ -72,6 +73,9 @@ def _format(summary: dict) -> str:
         ("braking / stale events", f"{summary['braking_events']} / {summary['stale_events']}"),
         ("tracks", summary["tracks"]),
     ]
+    tracking = summary.get("tracking_error")
+    if tracking:   # the estimate against the plan in force at each replan: what tracking_margin_m2 must cover
+        rows.append(("strayed from the plan in force", describe_tracking(tracking)))
     width = max(len(k) for k, _ in rows)
     lines = [f"{k.ljust(width)}  {v}" for k, v in rows]
     lines += [f"note: {n}" for n in summary["notes"]]

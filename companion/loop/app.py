@@ -345,6 +345,11 @@ class Companion:
         )
         self._replans_asked += 1
         self._last_replan_t = t_s
+        # where the plan in force put the drone at the request's start against where it is
+        # (job.position is the estimate moved along that plan by the lead: the difference is the same)
+        reference = self.executor.reference(job.t_vehicle_s)
+        if reference is not None:
+            self.state.tracking.add(job.position - reference[0])
         if self.state.goal_reached_t_s is None and self.builder.at_goal(job.position):
             self.state.goal_reached_t_s = t_s
             self.sequencer.on_goal_reached(t_s)

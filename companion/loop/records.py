@@ -94,6 +94,40 @@ class ReplanRecord:
 
 
 @dataclass
+class TrackingError:
+    """How far the vehicle strays from the plan in force before the next replan (NED m).
+
+    At each replan request the drone's estimate is compared with where the plan in force
+    put it at that time; the spread of these residuals is what a scenario's
+    ``[companion] tracking_margin_m2`` must cover. Fixed size: sums, not samples.
+    """
+
+    samples: int = 0
+    sum_sq: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    largest_m: float = 0.0
+
+    def add(self, residual: np.ndarray) -> None:
+        """One residual ``estimate - plan`` (3,), NED metres."""
+        x, y, z = (float(v) for v in residual)
+        self.samples += 1
+        self.sum_sq = [self.sum_sq[0] + x * x, self.sum_sq[1] + y * y, self.sum_sq[2] + z * z]
+        self.largest_m = max(self.largest_m, (x * x + y * y + z * z) ** 0.5)
+
+    def summary(self) -> dict | None:
+        """``{"samples", "rms_ned_m" (3,), "largest_m"}``, or None before the first residual."""
+        if not self.samples:
+            return None
+        return {"samples": self.samples, "rms_ned_m": [(v / self.samples) ** 0.5 for v in self.sum_sq],
+                "largest_m": self.largest_m}
+
+
+def describe_tracking(summary: dict) -> str:
+    """One line of a :meth:`TrackingError.summary`: rms per NED axis, the largest, how many."""
+    rms = "/".join(f"{v:.3f}" for v in summary["rms_ned_m"])
+    return f"rms N/E/D {rms} m, largest {summary['largest_m']:.3f} m over {summary['samples']} replans"
+
+
+@dataclass
 class CompanionState:
     """Counters and the current mode of the loop, for tests and the summary."""
 
@@ -113,4 +147,6 @@ class CompanionState:
     #: smallest realised contour of touch over every replan request (also those whose plan
     #: never came back or was superseded in real time); None until an obstacle was in range
     min_realised_contour: float | None = None
+    #: the estimate against the plan in force at each replan request (see :class:`TrackingError`)
+    tracking: TrackingError = field(default_factory=TrackingError)
     events: list = field(default_factory=list)

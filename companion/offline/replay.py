@@ -194,6 +194,7 @@ class ReplayResult:
             "stale_events": state.stale_events,
             "messages_rejected": state.messages_rejected,
             "tracks": len(self.companion.tracker),
+            "tracking_error": state.tracking.summary(),
             "events": [(round(t, 3), text) for t, text in state.events],
             "notes": list(self.notes),
         }

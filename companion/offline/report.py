@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from companion.loop.app import Companion
-from companion.loop.records import status_counts
+from companion.loop.records import describe_tracking, status_counts
 
 _FAILSAFE_WORDS = ("braking", "stale", "PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP", "slack used")
 
@@ -49,6 +49,7 @@ def companion_report(companion: Companion) -> dict:
         "tracks": len(companion.tracker),
         "obstacle_intake": companion.obstacles.summary(),
         "vehicle_clock": companion.perception.clock.summary(),
+        "tracking_error": state.tracking.summary(),
         "failsafe_events": [(round(t, 2), text) for t, text in state.events if any(w in text for w in _FAILSAFE_WORDS)],
         "events": [(round(t, 2), text) for t, text in state.events],
     }
@@ -115,6 +116,9 @@ def format_report(report: dict) -> str:
     ]
     width = max(len(label) for _, label in order)
     lines = [f"{label.ljust(width)}  {_fmt(report.get(key))}" for key, label in order if key in report]
+    tracking = report.get("tracking_error")
+    if tracking:
+        lines.append(f"{'strayed from the plan in force'.ljust(width)}  {describe_tracking(tracking)}")
     clock = report.get("vehicle_clock")
     if clock:
         lines.append(f"{'autopilot clock from'.ljust(width)}  {_clock_line(clock)}")

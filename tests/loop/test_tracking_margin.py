@@ -108,3 +108,38 @@ def test_that_the_loop_settings_are_checked_by_name():
         dataclasses.replace(scenario.loop, initial_velocity="measured")
     with pytest.raises(ConfigError, match="tracking_margin_m2"):
         dataclasses.replace(scenario.loop, tracking_margin_m2=-0.1)
+
+
+def test_that_the_tracking_error_sums_residuals_in_fixed_memory():
+    from companion.loop.records import TrackingError
+
+    te = TrackingError()
+    assert te.summary() is None
+    for r in ([0.3, 0.0, -0.4], [0.0, 0.1, 0.0], [-0.3, -0.1, 0.0]):
+        te.add(np.array(r))
+    s = te.summary()
+    assert s["samples"] == 3 and s["largest_m"] == pytest.approx(0.5)
+    np.testing.assert_allclose(s["rms_ned_m"], [np.sqrt(0.18 / 3), np.sqrt(0.02 / 3), np.sqrt(0.16 / 3)])
+
+
+def _short_hop(sim_lag_s: float) -> dict:
+    import tomllib
+
+    with open(SCENARIO, "rb") as f:
+        tables = tomllib.load(f)
+    tables.setdefault("sim", {})["velocity_time_constant_s"] = sim_lag_s
+    return tables
+
+
+def test_that_the_report_says_how_far_the_vehicle_strays_from_its_plans_and_more_when_the_model_is_wrong():
+    from companion.offline.harness import run_lockstep
+    from companion.offline.report import companion_report, format_report
+
+    matched = companion_report(run_lockstep(_short_hop(0.3), seed=0).companion)["tracking_error"]
+    slower = companion_report(run_lockstep(_short_hop(1.2), seed=0).companion)
+    assert matched["samples"] >= 5 and slower["tracking_error"]["samples"] >= 5
+    # the planner's 0.3 s lag is the vehicle's: what is left is estimate noise
+    assert max(matched["rms_ned_m"]) < 0.1
+    # a vehicle four times slower than the planner thinks strays further from every plan
+    assert slower["tracking_error"]["rms_ned_m"][0] > 2.0 * matched["rms_ned_m"][0]
+    assert "strayed from the plan in force" in format_report(slower)
