@@ -193,10 +193,7 @@ class ObstacleTracker:
             If ``times_s`` is not a finite 1-D array.
         """
         track = self._track(key)
-        t = np.asarray(times_s, dtype=float)
-        if t.ndim != 1 or not np.all(np.isfinite(t)):
-            raise EstimatorInputError(f"times_s must be a finite 1-D array, got shape {t.shape}")
-        lags = np.maximum(t - track.t_s, 0.0)
+        lags = np.maximum(_prediction_times(times_s) - track.t_s, 0.0)
         return track.predict_position(lags)
 
     def predict_many(self, keys: list, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -211,9 +208,7 @@ class ObstacleTracker:
             As :meth:`predict`.
         """
         tracks = [self._track(key) for key in keys]
-        t = np.asarray(times_s, dtype=float)
-        if t.ndim != 1 or not np.all(np.isfinite(t)):
-            raise EstimatorInputError(f"times_s must be a finite 1-D array, got shape {t.shape}")
+        t = _prediction_times(times_s)
         if not tracks:
             return np.zeros((0, t.size, 3)), np.zeros((0, t.size, 3, 3))
         lags = np.maximum(t[None, :] - np.array([tr.t_s for tr in tracks])[:, None], 0.0)
@@ -225,3 +220,11 @@ class ObstacleTracker:
             return self._tracks[key]
         except KeyError:
             raise UnknownTrackError(f"no track {key!r}; tracks held: {self.keys()}") from None
+
+
+def _prediction_times(times_s: np.ndarray) -> np.ndarray:
+    """``times_s`` as a finite 1-D float array (absolute s), or :class:`EstimatorInputError`."""
+    t = np.asarray(times_s, dtype=float)
+    if t.ndim != 1 or not np.all(np.isfinite(t)):
+        raise EstimatorInputError(f"times_s must be a finite 1-D array, got shape {t.shape}")
+    return t

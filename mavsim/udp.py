@@ -127,21 +127,22 @@ class UdpServer:
         sim0 = self.sim.now_us
         self._send(self.sim.drain())
         socks = {link.sock: name for name, link in self._links.items()}
-        while not self.stop_event.is_set():
+
+        def catch_up() -> None:
+            """Advance the simulation to the wall clock (times ``speed``), never past ``end_us``."""
             target = sim0 + round((time.monotonic() - t0) * self.speed * 1e6)
             if end_us is not None:
                 target = min(target, end_us)
             if target > self.sim.now_us:
                 self._send(self.sim.advance_to(target))
+
+        while not self.stop_event.is_set():
+            catch_up()
             if end_us is not None and self.sim.now_us >= end_us:
                 break
             readable, _, _ = select.select(list(socks), [], [], self._tick_s)
             if readable:  # handle what arrived at the time it arrived (a TIMESYNC answer carries it)
-                target = sim0 + round((time.monotonic() - t0) * self.speed * 1e6)
-                if end_us is not None:
-                    target = min(target, end_us)
-                if target > self.sim.now_us:
-                    self._send(self.sim.advance_to(target))
+                catch_up()
             for sock in readable:
                 name = socks[sock]
                 for _ in range(64):  # drain what is queued, bounded

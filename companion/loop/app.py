@@ -330,9 +330,13 @@ class Companion:
         said: Outbox = []
         lead = self.plan_lead_s()
         velocity = self.perception.drone.state.velocity
-        v0 = self.executor.initial_velocity(velocity, t_v + lead)
-        if self.loop.initial_velocity == "estimate":   # anchored on the estimate, changed as the plan in force changes it
-            v0 = velocity + (v0 - self.executor.initial_velocity(velocity, t_v))
+        if self.loop.initial_velocity == "plan":
+            v0 = self.executor.initial_velocity(velocity, t_v + lead)
+        elif lead > 0.0:   # anchored on the estimate, changed as the plan in force changes it over the lead
+            v0 = velocity + (self.executor.initial_velocity(velocity, t_v + lead)
+                             - self.executor.initial_velocity(velocity, t_v))
+        else:
+            v0 = np.array(velocity, dtype=float)   # a copy, as the executor hands out
         job = self.builder.build(
             seq=self._replans_asked,
             t_s=t_s,
@@ -347,9 +351,9 @@ class Companion:
         self._last_replan_t = t_s
         # where the plan in force put the drone at the request's start against where it is
         # (job.position is the estimate moved along that plan by the lead: the difference is the same)
-        reference = self.executor.reference(job.t_vehicle_s)
-        if reference is not None:
-            self.state.tracking.add(job.position - reference[0])
+        planned = self.executor.position_at(job.t_vehicle_s)   # the position only: no velocity model run
+        if planned is not None:
+            self.state.tracking.add(job.position - planned)
         if self.state.goal_reached_t_s is None and self.builder.at_goal(job.position):
             self.state.goal_reached_t_s = t_s
             self.sequencer.on_goal_reached(t_s)

@@ -139,6 +139,10 @@ class Executor:
         points = np.vstack([self.plan_p0[None], self.plan.positions])
         return np.array([np.interp(dt, times, points[:, k]) for k in range(3)])
 
+    def position_at(self, t_v: float) -> np.ndarray | None:
+        """Where the plan in force puts the drone at vehicle time ``t_v`` (NED m), or None without one."""
+        return None if self.plan is None else self._plan_position(t_v - self.plan_t0_v)
+
     def reference(self, t_v: float) -> tuple[np.ndarray, np.ndarray] | None:
         """Position and velocity of the plan in force at vehicle time ``t_v`` (NED m, m/s), or None.
 

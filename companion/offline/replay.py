@@ -453,7 +453,10 @@ def replay(
 
 def _is_clock_answer(msg) -> bool:
     """The companion's answer to the autopilot's TIMESYNC request (sent on receipt, not by a tick)."""
-    return msg.get_type() == "TIMESYNC" and int(msg.tc1) != 0
+    if msg.get_type() != "TIMESYNC":
+        return False
+    sync = messages.decode(msg)
+    return isinstance(sync, messages.TimeSync) and not sync.is_request
 
 
 def _marked_schedule(stream: list) -> list:
