@@ -8,8 +8,8 @@ from companion.core.planner import Planner
 from companion.loop.app import PLAN_ARRIVED, PLAN_LOST, Companion
 from companion.loop.config import load_scenario
 from companion.loop.planning import PlanResult
-from companion.mavlink.link import Received
 from companion.offline.replay_stand_ins import RecordedArrivals
+from tests.support.inbound import px4_offboard_heartbeat, received
 
 SCENARIO = "tests/data/short_hop.toml"
 
@@ -40,11 +40,9 @@ class HeldPlanner:
 
 
 def _feed(companion: Companion, t_s: float) -> list:
-    mav = mavlink2.MAVLink(None, 1, 1)
-    for msg in (mavlink2.MAVLink_heartbeat_message(2, 12, 157 | 128, 6 << 16, 4, 3),  # PX4 armed in OFFBOARD
+    for msg in (px4_offboard_heartbeat(),
                 mavlink2.MAVLink_local_position_ned_message(int(t_s * 1000), 0.0, 0.0, -5.0, 0.0, 0.0, 0.0)):
-        raw = bytes(msg.pack(mav))
-        companion.handle(Received(t_s, mav.parse_buffer(raw)[0], raw))
+        companion.handle(received(msg, t_s=t_s))
     return companion.tick(t_s)
 
 

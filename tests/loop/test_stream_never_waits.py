@@ -18,6 +18,7 @@ from companion.loop.config import load_scenario
 from companion.loop.realtime import PlanWorker, run_realtime
 from companion.mavlink.link import Received
 from tests.support.blocking_planner import FirstThenBlock
+from tests.support.inbound import px4_offboard_heartbeat
 
 SCENARIO = "tests/data/short_hop.toml"
 
@@ -40,7 +41,7 @@ class ScriptedAutopilot:
         out, now = [], self.clock()
         while self._next <= now + 1e-9:
             if self._i % 5 == 0:
-                out.append(self._rx(mavlink2.MAVLink_heartbeat_message(2, 12, 157 | 128, 6 << 16, 4, 3), now))
+                out.append(self._rx(px4_offboard_heartbeat(), now))
             out.append(self._rx(mavlink2.MAVLink_local_position_ned_message(int(round(self._next * 1000)), 0, 0, -5, 0, 0, 0), now))
             self._i += 1
             self._next = round(self._next + 0.05, 6)

@@ -10,7 +10,7 @@ from companion.loop.app import Companion
 from companion.loop.config import load_scenario
 from companion.loop.planning import InlinePlanning
 from companion.loop.track_selection import choose, confidence_radius, rank_by_risk
-from tests.support.inbound import received
+from tests.support.inbound import px4_offboard_heartbeat, received
 
 
 def test_that_tracks_rank_by_predicted_clearance_then_time_of_closest_approach():
@@ -43,7 +43,7 @@ def test_that_two_hundred_tracks_are_cut_to_the_limit_with_the_close_one_kept_an
             super().submit(job)
 
     companion = Companion(scenario, planning=Spy(Planner(scenario.planner)))
-    hb = mavlink2.MAVLink_heartbeat_message(2, 12, 157 | 128, 6 << 16, 4, 3)  # PX4, armed, OFFBOARD
+    hb = px4_offboard_heartbeat()
     rng = np.random.default_rng(4)
     far = np.column_stack([rng.uniform(-5, 25, 200), rng.choice([-1, 1], 200) * rng.uniform(5, 9, 200), np.full(200, -5.0)])
     texts = []

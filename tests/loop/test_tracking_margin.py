@@ -14,7 +14,7 @@ from companion.loop.app import Companion
 from companion.loop.config import load_scenario
 from tests.core.test_planner_scp import exact_contour, scenario_one
 from tests.loop.test_request_gating import SCENARIO, HeldPlanner
-from tests.support.inbound import received
+from tests.support.inbound import px4_offboard_heartbeat, received
 
 MARGIN = 0.04 * np.eye(3)
 
@@ -62,7 +62,7 @@ def _fly(companion: Companion, service: HeldPlanner, seconds: float = 2.0) -> li
     """Poses flying north at 1 m/s (LOCAL_POSITION_NED) at 20 Hz; every job is answered at the next tick."""
     jobs, t = [], 0.0
     while t < seconds:
-        for msg in (mavlink2.MAVLink_heartbeat_message(2, 12, 157 | 128, 6 << 16, 4, 3),
+        for msg in (px4_offboard_heartbeat(),
                     mavlink2.MAVLink_local_position_ned_message(int(t * 1000), t, 0.0, -5.0, 1.0, 0.0, 0.0)):
             companion.handle(received(msg, t_s=t))
         companion.tick(t)

@@ -17,3 +17,8 @@ def received(msg, src: tuple[int, int] = (1, 1), t_s: float = 1.0, link: str = "
 def px4_heartbeat() -> mavlink2.MAVLink_heartbeat_message:
     """A PX4 quadrotor's HEARTBEAT: armed, in AUTO.LOITER."""
     return mavlink2.MAVLink_heartbeat_message(2, 12, 157, 50593792, 4, 3)
+
+
+def px4_offboard_heartbeat() -> mavlink2.MAVLink_heartbeat_message:
+    """A PX4 quadrotor's HEARTBEAT: armed, in OFFBOARD (the loop streams plans)."""
+    return mavlink2.MAVLink_heartbeat_message(2, 12, 157 | 128, 6 << 16, 4, 3)
