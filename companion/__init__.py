@@ -2,7 +2,7 @@
 
 Layers (the pure core never imports the MAVLink edge):
 
-- ``companion.core.overlap``: overlap of two Gaussians (minmax procedure), pure numpy.
+- ``companion.core.overlap``: overlap of two Gaussians (minmax procedure), numpy with a compiled (numba) 3x3 kernel.
 - ``companion.core.planner``: sequential convex programming MPC on OSQP, pure.
 - ``companion.mavlink.link`` and friends: the MAVLink edge (connections, PX4 modes, offboard).
 - ``companion.commands``: one module per ``companion`` subcommand.

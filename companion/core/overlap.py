@@ -47,6 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
+from companion.core import minmax_kernel
 from companion.core import small_matrix as K
 from companion.errors import InputError
 
@@ -335,9 +336,22 @@ def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> 
     return _minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead)
 
 
-def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...]) -> MinmaxResult:
-    """:func:`minmax` on validated batch-last inputs: means (d, n), covariances (d, d, n)."""
+def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...],
+            compiled: bool = minmax_kernel.COMPILED) -> MinmaxResult:
+    """:func:`minmax` on validated batch-last inputs: means (d, n), covariances (d, d, n).
+
+    ``compiled``: 3x3 pairs go through the compiled kernel (:mod:`companion.core.minmax_kernel`,
+    the same operations per pair, so the same bits) when numba is installed; ``False`` runs
+    the vectorised numpy kernel below (the tests compare the two bit for bit).
+    """
     d, n = m1.shape
+    if d == 3 and compiled and isinstance(S1, np.ndarray):
+        fields, stalled = minmax_kernel.minmax3(m1, m2, S1, S2, _U_TOL, _MAX_NEWTON)
+        if stalled:
+            logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", _MAX_NEWTON, stalled)
+        del fields["coincident"]
+        return MinmaxResult(**{name: (v.reshape(lead) if v.ndim == 1 else v.T.reshape(lead + (d,)))
+                               for name, v in fields.items()})
     delta = m2 - m1
     scale = np.sqrt(np.maximum(sum(S1[i][i] for i in range(d)), sum(S2[i][i] for i in range(d))))
     coincident = np.sqrt(K.dot(delta, delta)) <= 1e-15 * scale
