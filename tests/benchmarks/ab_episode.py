@@ -9,7 +9,9 @@ Each round runs the episodes (antipodal family, campaign seed 1, ``hyperplane``)
 process per tree, the trees in alternating order, and reads the process's CPU time around each
 episode (``time.process_time``). It prints each tree's mean core-seconds, the ratio new / old,
 and a digest of each episode's score (SHA-256 of its JSON, every field but the solve times):
-equal digests mean the change left every simulated number as it was. Timings of a shared
+equal digests mean the change left every simulated number as it was. A compiled kernel, when
+the tree has one, is loaded before the first episode and its core-seconds reported apart (a
+campaign worker pays them once, not per episode). Timings of a shared
 machine drift between runs; the ratio of one run is the figure to quote.
 """
 
@@ -25,7 +27,13 @@ _CHILD = r"""
 import dataclasses, hashlib, json, sys, time
 sys.path.insert(0, sys.argv[1])
 from companion.offline.campaign.run import EpisodeTask, run_episode
-out = []
+c0 = time.process_time()
+try:    # a compiled kernel is loaded once per process (a campaign worker's start-up): timed apart
+    from companion.core import minmax_kernel
+    minmax_kernel.warm_up()
+except ImportError:
+    pass
+out = [[time.process_time() - c0, ""]]
 for index in [int(i) for i in sys.argv[2].split(",")]:
     task = EpisodeTask(family="antipodal", seed=1, index=index, method="hyperplane")
     c0 = time.process_time()
@@ -42,13 +50,14 @@ print(json.dumps(out))
 TIMEOUT_S = 1800.0
 
 
-def run_tree(tree: Path, episodes: str) -> list[tuple[float, str]]:
-    """(core-seconds, score digest) of each episode, flown by the code in ``tree`` in a fresh process."""
+def run_tree(tree: Path, episodes: str) -> tuple[float, list[tuple[float, str]]]:
+    """Start-up core-seconds, and (core-seconds, score digest) of each episode, flown by ``tree`` in a fresh process."""
     proc = subprocess.run([sys.executable, "-c", _CHILD, str(tree), episodes], capture_output=True, text=True,
                           cwd=tree, timeout=TIMEOUT_S)
     if proc.returncode != 0:
         raise SystemExit(f"{tree}: {proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else proc.returncode}")
-    return [(float(c), str(h)) for c, h in json.loads(proc.stdout.strip().splitlines()[-1])]
+    (warm, _), *episodes_run = json.loads(proc.stdout.strip().splitlines()[-1])
+    return float(warm), [(float(c), str(h)) for c, h in episodes_run]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -64,13 +73,17 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     trees = [args.old.resolve(), args.new.resolve()]
     runs: dict[Path, list] = {t: [] for t in trees}
+    warm: dict[Path, list[float]] = {t: [] for t in trees}
     for r in range(args.rounds):
         for tree in trees if r % 2 == 0 else trees[::-1]:
-            runs[tree].append(run_tree(tree, args.episodes))
+            start_up, run = run_tree(tree, args.episodes)
+            warm[tree].append(start_up)
+            runs[tree].append(run)
     mean = {t: sum(c for run in runs[t] for c, _ in run) / sum(len(run) for run in runs[t]) for t in trees}
     digests = {t: [h for _, h in runs[t][0]] for t in trees}
     for t, label in zip(trees, ("old", "new")):
-        print(f"{label} {t}: {mean[t]:.3f} core-s per episode; scores {' '.join(digests[t])}")
+        print(f"{label} {t}: {mean[t]:.3f} core-s per episode (+ {max(warm[t]):.2f} core-s once per process "
+              f"loading compiled kernels); scores {' '.join(digests[t])}")
     print(f"new / old: {mean[trees[1]] / mean[trees[0]]:.3f}; scores "
           f"{'identical' if digests[trees[0]] == digests[trees[1]] else 'DIFFER'}")
     return 0

@@ -279,6 +279,7 @@ class Formulation:
         self.wall_row_radius = self.r_min + BACKOFF_SIGMA
         self.wall_row_backoff_m = 0.0
         self._separator: tuple[PlanRequest, np.ndarray, overlap.MinmaxResult] | None = None
+        self._recheck: tuple[PlanRequest, np.ndarray, np.ndarray, tuple[SafetyFigures, bool]] | None = None
 
     def rows(self, request: PlanRequest, positions: np.ndarray, lam: np.ndarray | None) -> ObstacleRows:
         """Linearised obstacle rows around ``positions`` (N, 3) (and ``lam`` (P, N) if carried)."""
@@ -290,14 +291,27 @@ class Formulation:
 
     def wall_upper(self, request: PlanRequest) -> np.ndarray:
         """Right-hand sides (W, N) of the wall rows ``a.p_i <= b - r sqrt(a' S_i a) - R_drone``."""
-        spread = np.sqrt(np.einsum("wk,nkl,wl->wn", request.walls_normal, request.safety_covs, request.walls_normal))
-        upper = request.walls_offset[:, None] - self.wall_row_radius * spread - self.drone_radius_m
+        upper = request.walls_offset[:, None] - self.wall_row_radius * request.wall_spread - self.drone_radius_m
         return upper - self.wall_row_backoff_m if self.wall_row_backoff_m else upper
 
     def recheck(self, request: PlanRequest, positions: np.ndarray, in_range: np.ndarray) -> tuple[SafetyFigures, bool]:
-        """Exact figures of ``positions`` and whether this formulation's own constraints hold on them."""
+        """Exact figures of ``positions`` and whether this formulation's own constraints hold on them.
+
+        The last answer is kept: the SCP rechecks its converged iterate, and the plan it
+        returns is that iterate, so the final recheck asks the same question.
+        """
+        cached = self._recheck
+        if (cached is not None and cached[0] is request and np.array_equal(cached[1], positions)
+                and np.array_equal(cached[2], in_range)):
+            return cached[3]
         figs = self._exact(request, positions)
-        return figs, self._walls_hold(figs) and bool(np.all(figs.eta[in_range] >= self.r_min - RECHECK_TOL_SIGMA))
+        answer = figs, self._holds(request, positions, figs, in_range)
+        self._recheck = (request, np.array(positions), np.array(in_range), answer)
+        return answer
+
+    def _holds(self, request: PlanRequest, positions: np.ndarray, figs: SafetyFigures, in_range: np.ndarray) -> bool:
+        """Whether this formulation's own constraints hold on ``positions`` (their exact figures ``figs``)."""
+        return self._walls_hold(figs) and bool(np.all(figs.eta[in_range] >= self.r_min - RECHECK_TOL_SIGMA))
 
     def separator(self, request: PlanRequest, positions: np.ndarray) -> overlap.MinmaxResult:
         """Minmax of the drone at ``positions`` (N, 3) against every obstacle (P, N), nudged off coincident means.
@@ -370,9 +384,8 @@ class Deterministic(Formulation):
     def rows(self, request, positions, lam=None):
         return deterministic_rows(positions, request.obstacle_means, self._radius_sum(request))
 
-    def recheck(self, request, positions, in_range):
-        figs = self._exact(request, positions)
-        return figs, self._walls_hold(figs) and bool(np.all(figs.distance_margin[in_range] >= -RECHECK_TOL_M))
+    def _holds(self, request, positions, figs, in_range):
+        return self._walls_hold(figs) and bool(np.all(figs.distance_margin[in_range] >= -RECHECK_TOL_M))
 
 
 class Bhattacharyya(Formulation):
@@ -384,15 +397,14 @@ class Bhattacharyya(Formulation):
         return bhattacharyya_rows(positions, request.safety_covs, request.obstacle_means, request.obstacle_covs,
                                   self._radius_sum(request), self.r_min)
 
-    def recheck(self, request, positions, in_range):
-        figs = self._exact(request, positions)
+    def _holds(self, request, positions, figs, in_range):
         ok = self._walls_hold(figs)
         if request.num_obstacles:
             value, _ = signed_bhattacharyya(positions, request.safety_covs, request.obstacle_means,
                                             request.obstacle_covs, self._radius_sum(request))
             margin = value - 0.5 * self.r_min**2
             ok &= bool(np.all(margin[in_range] >= -self.r_min * RECHECK_TOL_SIGMA))
-        return figs, ok
+        return ok
 
 
 #: The formulation class of each ``[planner] formulation`` value.

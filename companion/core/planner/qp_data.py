@@ -82,7 +82,7 @@ class RequestData:
         c = np.zeros((N - 1, 3))
         c[0] = v0
         q = np.zeros(layout.n)
-        q[layout.col["V"].slice] = (jerk_scale * (layout.d2.T @ c)).ravel()
+        q[layout.col["V"].slice] = (jerk_scale * (layout.d2_t @ c)).ravel()
         pn = layout.col["p"].start + 3 * (N - 1)
         q[layout.col["p"].slice] = np.tile(-2.0 * wp * (m @ request.target), N)
         q[pn:pn + 3] += -2.0 * wt * (m @ request.target)

@@ -258,6 +258,7 @@ class QpLayout:
         d2 = sp.diags([np.ones(N - 1), -2.0 * np.ones(N - 1)], [1, 0], shape=(N - 1, N)).tolil()
         d2[np.arange(1, N - 1), np.arange(0, N - 2)] = 1.0
         self.d2 = sp.csr_matrix(d2)
+        self.d2_t = self.d2.T      # (N, N-1) CSC, for the jerk term's q at every request
         dtd = sp.kron(self.d2.T @ self.d2, sp.eye(3)).tocoo()
         keep = dtd.row <= dtd.col
         vr, vc, vv = dtd.row[keep], dtd.col[keep], dtd.data[keep]

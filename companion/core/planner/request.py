@@ -168,6 +168,16 @@ class PlanRequest:
         return CovariancePairs.from_arrays(np.broadcast_to(self.safety_covs[None], self.obstacle_covs.shape),
                                            self.obstacle_covs, validated=True)   # checked in __post_init__
 
+    @cached_property
+    def wall_spread(self) -> np.ndarray:
+        """``sqrt(a' S_i a)`` (W, N), metres: the drone's standard deviation (with the margin) along each wall normal.
+
+        Built once per request: the wall rows' right-hand sides and every exact recheck use it.
+        """
+        spread = np.sqrt(np.einsum("wk,nkl,wl->wn", self.walls_normal, self.safety_covs, self.walls_normal))
+        spread.setflags(write=False)
+        return spread
+
     @property
     def horizon_steps(self) -> int:
         """``N``, the number of predicted steps."""

@@ -77,8 +77,7 @@ def exact_safety(request: PlanRequest, positions: np.ndarray, drone_radius_m: fl
         eta = lam = distance = np.zeros((0, N))
     # a.p_i + r sqrt(a' S_i a) + R_drone <= b
     a, b = request.walls_normal, request.walls_offset
-    spread = np.sqrt(np.einsum("wk,nkl,wl->wn", a, request.safety_covs, a))
-    wall_margin = b[:, None] - a @ positions.T - wall_radius * spread - drone_radius_m
+    wall_margin = b[:, None] - a @ positions.T - wall_radius * request.wall_spread - drone_radius_m
     return SafetyFigures(
         eta=eta,
         contour_of_touch=np.asarray(overlap.confidence_from_radius(eta, 3)).reshape(eta.shape),
