@@ -22,30 +22,27 @@ ran. Per pair it is a few hundred scalar operations with no temporary arrays: th
 vectorised kernel (docs/PERFORMANCE.md).
 
 Why numba (a runtime dependency): it installs from a wheel with no compile step at
-install. The function is compiled on the first call in a process, or loaded from numba's
-disk cache (``cache=True``, next to this file or in the user's cache directory): only the
-first process after an install or a change of this file compiles (about 2 s); later ones
-import numba and load the machine code (about 1 s on a quiet 2-core machine). numba is
-imported on first use only, so commands that never plan do not pay for it, and the
-real-time planning process calls :func:`warm_up` before it reports ready. Without numba
-(:data:`COMPILED` false) the numpy kernel runs.
+install; :mod:`companion.core.jit` says when the kernel is compiled or loaded. Without numba
+the numpy kernel runs.
 
 Inputs are validated by the caller (:class:`companion.core.overlap.CovariancePairs`).
 """
 
 from __future__ import annotations
 
-import functools
-import importlib.util
 import math
 
 import numpy as np
 
-#: Whether numba is installed (then 3x3 pairs use the compiled kernel). numba itself is
-#: imported, and the kernel compiled or loaded from its cache, on first use only.
-COMPILED = importlib.util.find_spec("numba") is not None
+from companion.core import jit
+
+def _signature(t):
+    """Means (3, n) and covariances (3, 3, n) in, then the outputs (n,) and (3, n); returns an int."""
+    r2, r3, w1, w2 = jit.readonly(t, 2), jit.readonly(t, 3), t.float64[::1], t.float64[:, ::1]
+    return t.int64(r2, r2, r3, r3, t.float64, t.int64, w1, w1, w1, w2, w1, w2, w1, w1, w2, t.int8[::1])
 
 
+@jit.lazy(_signature)
 def _minmax3(m1, m2, s1, s2, u_tol, max_newton,
              lam, eta, residual, alpha, beta, normal, sc1, sc2, grad, coincident):
     """Per pair ``p`` of 3-D Gaussians ``N(m1, s1)``, ``N(m2, s2)``: the minmax separator.
@@ -176,14 +173,6 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton,
     return stalled
 
 
-@functools.cache
-def _compiled():
-    """The numba-compiled :func:`_minmax3` (compiled, or loaded from the disk cache, on first call)."""
-    import numba
-
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(_minmax3)
-
-
 def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
             u_tol: float, max_newton: int) -> tuple[dict[str, np.ndarray], int]:
     """The separator fields of ``n`` validated 3-D pairs, and how many pairs did not converge.
@@ -209,19 +198,8 @@ def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
     out = {name: np.empty(n) for name in ("lam", "eta", "residual", "beta", "s1", "s2")}
     out.update({name: np.empty((3, n)) for name in ("alpha", "normal", "eta_grad_mu1")})
     out["coincident"] = np.empty(n, dtype=np.int8)
-    stalled = _compiled()(np.ascontiguousarray(m1), np.ascontiguousarray(m2), np.ascontiguousarray(s1),
+    stalled = _minmax3()(np.ascontiguousarray(m1), np.ascontiguousarray(m2), np.ascontiguousarray(s1),
                           np.ascontiguousarray(s2), float(u_tol), int(max_newton),
                           out["lam"], out["eta"], out["residual"], out["alpha"], out["beta"], out["normal"],
                           out["s1"], out["s2"], out["eta_grad_mu1"], out["coincident"])
     return out, int(stalled)
-
-
-def warm_up() -> None:
-    """Compile the kernel (or load it from numba's disk cache) now, on one pair.
-
-    The real-time planning process calls this before it says it is ready, so that the
-    first replan of a flight does not pay the compilation (seconds on a fresh install).
-    """
-    if COMPILED:
-        eye = np.eye(3)[:, :, None].copy()
-        minmax3(np.zeros((3, 1)), np.array([[1.0], [0.0], [0.0]]), eye, 2.0 * eye, 1e-10, 60)

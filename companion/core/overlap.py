@@ -24,7 +24,9 @@ kept from the signs seen converges in a handful of steps to machine precision. I
 derivative is closed form: ``phi'(u) = 2 - 2 t w / q1 + 2 t v / q2`` with
 ``q1 = x'S1x``, ``q2 = x'S2x``, ``w = (S1x)' A^-1 (S1x)`` and ``v = q1 - t w``.
 The 2x2 and 3x3 solves use closed-form adjugates, vectorised over all pairs
-(:mod:`companion.core.small_matrix`, the one small-matrix kernel).
+(:mod:`companion.core.small_matrix`, the one small-matrix kernel); 3-D pairs, the
+planner's, run the same operations per pair in one compiled loop
+(:mod:`companion.core.minmax_kernel`, numba) when numba is installed, with the same bits.
 
 Everything broadcasts over leading dimensions: means ``(..., d)``, covariances
 ``(..., d, d)``; there is no Python loop per pair. Inputs are validated once per call
@@ -39,6 +41,7 @@ other. The small-matrix algebra lives in :mod:`companion.core.small_matrix`.
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass
 from functools import cached_property
@@ -47,7 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
-from companion.core import minmax_kernel
+from companion.core import jit, minmax_kernel
 from companion.core import small_matrix as K
 from companion.errors import InputError
 
@@ -153,6 +156,12 @@ def _require_pd(ok: NDArray[np.bool_], name: str) -> None:
         raise InputError(f"{name} is not positive definite{where}")
 
 
+@functools.cache
+def _upper_indices(d: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Row and column indices of the strict upper triangle of a ``d x d`` matrix."""
+    return np.triu_indices(d, 1)
+
+
 def _symmetrised_components(name: str, comp: Array, check: bool = True) -> Array:
     """Check a ``(d, d, n)`` component batch for symmetry (unless ``check`` is false) and symmetrise it.
 
@@ -164,7 +173,7 @@ def _symmetrised_components(name: str, comp: Array, check: bool = True) -> Array
         return comp
     if comp.base is not None or not comp.flags.writeable:    # a view of the caller's array: copy first
         comp = comp.copy()
-    iu, ju = np.triu_indices(d, 1)
+    iu, ju = _upper_indices(d)
     upper, lower = comp[iu, ju], comp[ju, iu]
     asym = np.abs(upper - lower) if check else None
     if check and np.any(asym > 1e-9 * np.max(np.abs(comp), axis=(0, 1)) + 1e-300):
@@ -225,6 +234,20 @@ class CovariancePairs:
             _require_pd(K.is_positive_definite(comp).reshape(lead), name)
             out.append(comp)
         return cls(lead=tuple(lead), s1=out[0], s2=out[1])
+
+    @classmethod
+    def shared_first(cls, cov1: Array, cov2: Array) -> CovariancePairs:
+        """Validated pairs of one ``cov1`` (N, d, d) against each row of ``cov2`` (P, N, d, d): lead (P, N).
+
+        What :meth:`from_arrays` gives for ``cov1`` broadcast to ``cov2``'s shape with
+        ``validated=True`` (the same values), with ``cov1`` laid out and symmetrised once
+        and tiled ``P`` times: the planner's drone against each obstacle, once per request.
+        """
+        c1, c2 = np.asarray(cov1, dtype=float), np.asarray(cov2, dtype=float)
+        P, d = c2.shape[0], c1.shape[-1]
+        s1 = _symmetrised_components("cov1", K.matrices_to_components(c1), check=False)
+        s2 = _symmetrised_components("cov2", K.matrices_to_components(c2), check=False)
+        return cls(lead=c2.shape[:-2], s1=np.tile(s1, (1, 1, P)), s2=s2)
 
     @property
     def dim(self) -> int:
@@ -337,7 +360,7 @@ def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> 
 
 
 def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...],
-            compiled: bool = minmax_kernel.COMPILED) -> MinmaxResult:
+            compiled: bool = jit.COMPILED) -> MinmaxResult:
     """:func:`minmax` on validated batch-last inputs: means (d, n), covariances (d, d, n).
 
     ``compiled``: 3x3 pairs go through the compiled kernel (:mod:`companion.core.minmax_kernel`,

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Callable
 
-from companion.core import minmax_kernel
+from companion.core import jit
 from companion.core.planner import Planner, PlannerConfig
 from companion.loop.app import Companion
 from companion.loop.backlog import ObstacleBacklog
@@ -70,7 +70,7 @@ class WorkerStats:
 def _serve(conn: Connection, config: PlannerConfig, make_planner: Callable[[PlannerConfig], Planner]) -> None:
     """The planning process: solve each ``(seq, request, warm_start)`` received, send ``(seq, plan, error)``."""
     planner = make_planner(config)
-    minmax_kernel.warm_up()    # compile the overlap kernel (or load it from its cache) before the first replan
+    jit.warm_up()    # compile the planner's kernels (or load them from their cache) before the first replan
     gc.freeze()  # what exists now is never walked again: a full collection would add ~100 ms to a solve
     conn.send("ready")
     while True:
@@ -122,7 +122,7 @@ class PlanWorker:
         # The stream side runs the same compiled overlap kernel (the request builder's realised
         # contour of touch): load it now, while the planning process loads its own, so the
         # first request does not stall the setpoint stream for the load (0.7 s measured).
-        minmax_kernel.warm_up()
+        jit.warm_up()
         self._in_flight: ReplanJob | None = None
         self._pending: ReplanJob | None = None
         self._dead = False

@@ -29,8 +29,8 @@ sys.path.insert(0, sys.argv[1])
 from companion.offline.campaign.run import EpisodeTask, run_episode
 c0 = time.process_time()
 try:    # a compiled kernel is loaded once per process (a campaign worker's start-up): timed apart
-    from companion.core import minmax_kernel
-    minmax_kernel.warm_up()
+    from companion.core import jit
+    jit.warm_up()
 except ImportError:
     pass
 out = [[time.process_time() - c0, ""]]

@@ -98,10 +98,17 @@ def _unit_separation(p_bar: np.ndarray, means: np.ndarray) -> np.ndarray:
 _NUDGE_M = 1e-6
 
 
-def _nudge(p_bar: np.ndarray, means: np.ndarray) -> np.ndarray:
-    """Drone iterate moved off any obstacle mean it coincides with (minmax needs a direction)."""
-    d = means - p_bar[None]
-    close = np.linalg.norm(d, axis=-1) <= _NUDGE_M
+def _coincident(p_bar: np.ndarray, means: np.ndarray) -> np.ndarray:
+    """(P, N) booleans: the drone iterate ``p_bar`` (N, 3) within :data:`_NUDGE_M` of an obstacle mean (P, N, 3)."""
+    return np.linalg.norm(means - p_bar[None], axis=-1) <= _NUDGE_M
+
+
+def _nudge(p_bar: np.ndarray, means: np.ndarray, close: np.ndarray | None = None) -> np.ndarray:
+    """Drone iterate moved off any obstacle mean it coincides with (minmax needs a direction).
+
+    ``close``: :func:`_coincident` of these arguments, if the caller has it.
+    """
+    close = _coincident(p_bar, means) if close is None else close
     if not np.any(close):
         return np.broadcast_to(p_bar[None], means.shape)
     out = np.broadcast_to(p_bar[None], means.shape).copy()
@@ -313,13 +320,15 @@ class Formulation:
         """Whether this formulation's own constraints hold on ``positions`` (their exact figures ``figs``)."""
         return self._walls_hold(figs) and bool(np.all(figs.eta[in_range] >= self.r_min - RECHECK_TOL_SIGMA))
 
-    def separator(self, request: PlanRequest, positions: np.ndarray) -> overlap.MinmaxResult:
+    def separator(self, request: PlanRequest, positions: np.ndarray,
+                  close: np.ndarray | None = None) -> overlap.MinmaxResult:
         """Minmax of the drone at ``positions`` (N, 3) against every obstacle (P, N), nudged off coincident means.
 
         The last result is kept: the SCP's exact recheck of an iterate and the next
-        linearisation around it ask for the same one.
+        linearisation around it ask for the same one. ``close``: :func:`_coincident` of
+        ``positions``, if the caller has it.
         """
-        mu1 = _nudge(positions, request.obstacle_means)
+        mu1 = _nudge(positions, request.obstacle_means, close)
         cached = self._separator
         if cached is not None and cached[0] is request and np.array_equal(cached[1], mu1):
             return cached[2]
@@ -328,9 +337,10 @@ class Formulation:
         return res
 
     def _exact(self, request: PlanRequest, positions: np.ndarray) -> SafetyFigures:
-        nudged = request.num_obstacles and bool(np.any(
-            np.linalg.norm(request.obstacle_means - positions[None], axis=-1) <= _NUDGE_M))
-        separator = None if nudged or not request.num_obstacles else self.separator(request, positions)
+        separator = None
+        if request.num_obstacles:
+            close = _coincident(positions, request.obstacle_means)
+            separator = None if np.any(close) else self.separator(request, positions, close)
         return exact_safety(request, positions, self.drone_radius_m, self.wall_radius, separator)
 
     @staticmethod

@@ -165,8 +165,7 @@ class PlanRequest:
         Every minmax of this request (each SCP iterate's rows, the exact recheck) reuses
         them instead of validating the covariances again.
         """
-        return CovariancePairs.from_arrays(np.broadcast_to(self.safety_covs[None], self.obstacle_covs.shape),
-                                           self.obstacle_covs, validated=True)   # checked in __post_init__
+        return CovariancePairs.shared_first(self.safety_covs, self.obstacle_covs)   # checked in __post_init__
 
     @cached_property
     def wall_spread(self) -> np.ndarray:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -32,19 +33,26 @@ class SafetyFigures:
     Attributes
     ----------
     eta : (P, N) radius-aware touch radius (Mahalanobis units).
-    contour_of_touch : (P, N) ``chi2_3.cdf(max(eta, 0)^2)``.
-    overlap : (P, N) ``2 (1 - Phi(max(eta, 0)))``.
+    contour_of_touch : (P, N) ``chi2_3.cdf(max(eta, 0)^2)`` (computed on first use: the
+        SCP's rechecks decide on ``eta`` and the margins, only the plan reports it).
+    overlap : (P, N) ``2 (1 - Phi(max(eta, 0)))`` (on first use, likewise).
     wall_margin : (W, N) ``b - a.p - r_wall sqrt(a' S a) - R_drone``, metres.
     distance_margin : (P, N) ``|o - p| - R``, metres (used by the deterministic baseline).
     lam : (P, N) admissible overlap parameter at the positions.
     """
 
     eta: np.ndarray
-    contour_of_touch: np.ndarray
-    overlap: np.ndarray
     wall_margin: np.ndarray
     distance_margin: np.ndarray
     lam: np.ndarray
+
+    @cached_property
+    def contour_of_touch(self) -> np.ndarray:
+        return np.asarray(overlap.confidence_from_radius(self.eta, 3)).reshape(self.eta.shape)
+
+    @cached_property
+    def overlap(self) -> np.ndarray:
+        return np.asarray(overlap.overlap_from_radius(np.maximum(self.eta, 0.0))).reshape(self.eta.shape)
 
 
 def exact_safety(request: PlanRequest, positions: np.ndarray, drone_radius_m: float, wall_radius: float,
@@ -80,8 +88,6 @@ def exact_safety(request: PlanRequest, positions: np.ndarray, drone_radius_m: fl
     wall_margin = b[:, None] - a @ positions.T - wall_radius * request.wall_spread - drone_radius_m
     return SafetyFigures(
         eta=eta,
-        contour_of_touch=np.asarray(overlap.confidence_from_radius(eta, 3)).reshape(eta.shape),
-        overlap=np.asarray(overlap.overlap_from_radius(np.maximum(eta, 0.0))).reshape(eta.shape),
         wall_margin=wall_margin,
         distance_margin=distance,
         lam=lam,

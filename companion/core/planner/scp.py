@@ -37,7 +37,7 @@ import numpy as np
 from collections.abc import Mapping
 from types import MappingProxyType
 
-from companion.core import overlap
+from companion.core import jit, overlap
 from companion.core.planner.budget import WorkBudget
 from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import Formulation, ObstacleRows, make_formulation, relax_out_of_range
@@ -75,6 +75,26 @@ def _right_bulge_velocities(route: np.ndarray, n_steps: int, step_s: float) -> n
     right = np.array([-h[1], h[0], 0.0]) / np.linalg.norm(h) if np.linalg.norm(h) > 1e-9 else np.array([0.0, 1.0, 0.0])
     offset = HEAD_ON_BIAS_M * np.sin(np.pi * np.arange(n_steps + 1) / n_steps)
     return np.diff(offset)[:, None] / step_s * right
+
+
+@jit.lazy(lambda t: t.void(t.float64[:, ::1], jit.readonly(t, 1), jit.readonly(t, 1), jit.readonly(t, 1)))
+def _project_forward(v, v0, vmax, da):
+    """In place, the rows of ``v`` (N, 3), m/s, projected onto ``|V_i - V_{i-1}| <= da`` and ``|V_i| <= vmax``.
+
+    A forward pass from ``V_0 = v0``: each row is clipped to within ``da`` (``a_max tau``)
+    of the projected row before it, then to the speed box. A sequential recursion, so one
+    compiled loop (or, without numba, this function in Python); ``lo if x < lo`` and
+    ``hi if x > hi`` are Python's ``max(x, lo)`` and ``min(x, hi)`` exactly.
+    """
+    for i in range(v.shape[0]):
+        for k in range(3):
+            prev = v0[k] if i == 0 else v[i - 1, k]
+            lo, hi = prev - da[k], prev + da[k]
+            x = v[i, k]
+            x = lo if lo > x else x
+            x = hi if hi < x else x
+            x = -vmax[k] if -vmax[k] > x else x
+            v[i, k] = vmax[k] if vmax[k] < x else x
 
 
 class Planner:
@@ -224,17 +244,11 @@ class Planner:
             # deterministically, as the rules of the air do (pass right).
             route = request.target - request.position
             v = np.broadcast_to(route / (N * tau), (N, 3)) + _right_bulge_velocities(route, N, tau)
-        # project onto |V_i| <= v_max and |V_i - V_{i-1}| <= a_max tau (forward pass; a
-        # sequential recursion, so in Python floats: the same IEEE operations as np.clip
-        # without an array call per step and axis)
-        vmax, da = cfg.velocity_max.tolist(), (cfg.accel_max * tau).tolist()
-        rows = np.asarray(v, dtype=float).tolist()
-        prev = np.asarray(v0, dtype=float).tolist()
-        for row in rows:
-            for k in range(3):
-                x = min(max(row[k], prev[k] - da[k]), prev[k] + da[k])
-                prev[k] = row[k] = min(max(x, -vmax[k]), vmax[k])
-        return np.array(rows)
+        out = np.array(v, dtype=float)
+        v0 = np.ascontiguousarray(v0, dtype=float)
+        vmax, da = np.ascontiguousarray(cfg.velocity_max, dtype=float), np.ascontiguousarray(cfg.accel_max * tau)
+        (_project_forward() if jit.COMPILED else _project_forward.py_func)(out, v0, vmax, da)
+        return out
 
     # ------------------------------------------------------------------ internals
     def _workspace(self, request: PlanRequest) -> QpWorkspace:

@@ -1,0 +1,61 @@
+"""Compiled hot loops of the pure core (numba), compiled or loaded on first use.
+
+A function registered with :func:`lazy` is compiled for its one signature the first time
+it is asked for, or loaded from numba's disk cache (``cache=True``: next to its source
+file, else in the user's cache directory). Only the first process after an install or a
+change of the file compiles (about 2 s per function); later processes import numba and
+load the machine code (about 1 s in all on a quiet 2-core machine). numba is imported on
+first use only, so commands that never plan do not pay for it; the real-time planning
+process and the setpoint stream call :func:`warm_up` before their first request.
+
+The compiled functions do the operations of the Python or numpy code they replace in
+the same order, so their results are the same bits (each is tested so); without numba
+(:data:`COMPILED` false) that code runs instead.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.util
+from types import ModuleType
+from typing import Callable
+
+#: Whether numba is installed (then the registered functions are compiled).
+COMPILED = importlib.util.find_spec("numba") is not None
+
+_REGISTERED: list[Callable[[], Callable]] = []
+
+
+def lazy(signature: Callable[[ModuleType], object]) -> Callable[[Callable], Callable[[], Callable]]:
+    """Decorator: ``fn`` becomes a getter of its compiled version for one signature.
+
+    ``signature(numba.types)`` builds the signature (so that numba is imported only when
+    compiling); :func:`readonly` declares an input array that may be read-only. The getter
+    compiles (or loads) once per process and returns the compiled function; calling it with
+    arrays of another type or layout raises ``TypeError``.
+    """
+
+    def register(fn: Callable) -> Callable[[], Callable]:
+        @functools.cache
+        def compiled() -> Callable:
+            import numba
+
+            return numba.njit(signature(numba.types), cache=True, nogil=True, error_model="numpy")(fn)
+
+        compiled.py_func = fn    # the Python original (tests compare the two)
+        _REGISTERED.append(compiled)
+        return compiled
+
+    return register
+
+
+def readonly(types: ModuleType, ndim: int) -> object:
+    """numba's type of a C-contiguous float64 input array of ``ndim`` dimensions, read-only or not."""
+    return types.Array(types.float64, ndim, "C", readonly=True)
+
+
+def warm_up() -> None:
+    """Compile or load every registered function now (a no-op without numba or when already done)."""
+    if COMPILED:
+        for compiled in _REGISTERED:
+            compiled()
