@@ -63,6 +63,16 @@ def main(argv: list[str]) -> int:
     if wanted:
         modules = [m for m in modules if m.removeprefix("bench_") in wanted or m in wanted]
     rows: list[dict] = []
+    # The compiled kernels are loaded (or compiled) once per process, as a planning process or
+    # a campaign worker does at its start: timed here, apart from every suite's figures.
+    from companion.core import jit
+    from companion.core.planner import Planner  # noqa: F401  (registers the planner's kernels)
+
+    t0 = time.perf_counter()
+    jit.warm_up()
+    rows.append({"suite": "start-up", "name": "compiled kernels loaded (numba import + disk cache, or compile)",
+                 "value": time.perf_counter() - t0, "unit": "s",
+                 "note": "once per process, before the suites; compiling (first run after an install) takes longer"})
     for name in modules:
         module = importlib.import_module(f"{_pkg.__name__}.{name}")
         t0 = time.perf_counter()

@@ -54,6 +54,9 @@ class QpSolution:
     iterations : ADMM iterations.
     solve_time_s : OSQP's own time for this solve (its ``info.solve_time``), seconds; a
         diagnostic only (benchmarks compare the replan time with it).
+    update_time_s : OSQP's own time in the updates since the previous solve (its
+        ``info.update_time``: new data, the numerical refactorisation of the KKT matrix
+        after new ``P`` or ``A`` values or ``rho``), seconds; a diagnostic likewise.
     """
 
     x: np.ndarray
@@ -64,6 +67,7 @@ class QpSolution:
     accurate: bool
     iterations: int
     solve_time_s: float = 0.0
+    update_time_s: float = 0.0
 
 
 class OsqpQp:
@@ -150,4 +154,5 @@ class OsqpQp:
             objective=float(r.info.obj_val), status=str(r.info.status),
             usable=status in _ACCEPTABLE and np.all(np.isfinite(r.x)), accurate=status in _SOLVED,
             iterations=int(r.info.iter), solve_time_s=float(r.info.solve_time),
+            update_time_s=float(r.info.update_time),
         )
