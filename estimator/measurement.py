@@ -124,8 +124,9 @@ def _noise(cov: np.ndarray | None, std: float, name: str) -> np.ndarray:
     c = np.asarray(cov, dtype=float)
     if c.shape == (3,):
         # per-axis variances: NaN = unknown on that axis (PX4 convention)
-        var = np.where(np.isnan(c), default_var, c)
-        if not np.all(np.isfinite(var)) or np.any(var <= 0.0):
+        # on three Python floats: cheaper than np.where / np.isfinite / np.any on three numbers
+        var = [default_var if math.isnan(x) else x for x in c.tolist()]
+        if not all(math.isfinite(x) and x > 0.0 for x in var):
             raise MeasurementRejected(
                 Reason.INVALID_COVARIANCE, f"{name} variances must be finite and > 0, got {c.tolist()}"
             )
