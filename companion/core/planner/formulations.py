@@ -285,7 +285,7 @@ class Formulation:
         self.wall_radius = self.r_min
         self.wall_row_radius = self.r_min + BACKOFF_SIGMA
         self.wall_row_backoff_m = 0.0
-        self._separator: tuple[PlanRequest, np.ndarray, overlap.MinmaxResult] | None = None
+        self._separator: tuple[PlanRequest, np.ndarray, bool, overlap.MinmaxResult] | None = None
         self._recheck: tuple[PlanRequest, np.ndarray, np.ndarray, tuple[SafetyFigures, bool]] | None = None
 
     def rows(self, request: PlanRequest, positions: np.ndarray, lam: np.ndarray | None) -> ObstacleRows:
@@ -320,27 +320,30 @@ class Formulation:
         """Whether this formulation's own constraints hold on ``positions`` (their exact figures ``figs``)."""
         return self._walls_hold(figs) and bool(np.all(figs.eta[in_range] >= self.r_min - RECHECK_TOL_SIGMA))
 
-    def separator(self, request: PlanRequest, positions: np.ndarray,
-                  close: np.ndarray | None = None) -> overlap.MinmaxResult:
-        """Minmax of the drone at ``positions`` (N, 3) against every obstacle (P, N), nudged off coincident means.
+    def separator(self, request: PlanRequest, positions: np.ndarray) -> overlap.MinmaxResult:
+        """Minmax of the drone at ``positions`` (N, 3) against every obstacle (P, N), nudged off coincident means."""
+        return self._separation(request, positions)[1]
 
-        The last result is kept: the SCP's exact recheck of an iterate and the next
-        linearisation around it ask for the same one. ``close``: :func:`_coincident` of
-        ``positions``, if the caller has it.
+    def _separation(self, request: PlanRequest, positions: np.ndarray) -> tuple[bool, overlap.MinmaxResult]:
+        """Whether ``positions`` had to be nudged off an obstacle mean, and :meth:`separator`.
+
+        The last answer is kept: the SCP's exact recheck of an iterate and the next
+        linearisation around it ask for the same one.
         """
-        mu1 = _nudge(positions, request.obstacle_means, close)
         cached = self._separator
-        if cached is not None and cached[0] is request and np.array_equal(cached[1], mu1):
-            return cached[2]
-        res = request.covariance_pairs.minmax(mu1, request.obstacle_means)
-        self._separator = (request, np.array(mu1), res)
-        return res
+        if cached is not None and cached[0] is request and np.array_equal(cached[1], positions):
+            return cached[2], cached[3]
+        close = _coincident(positions, request.obstacle_means)
+        nudged = bool(np.any(close))
+        res = request.covariance_pairs.minmax(_nudge(positions, request.obstacle_means, close), request.obstacle_means)
+        self._separator = (request, np.array(positions), nudged, res)
+        return nudged, res
 
     def _exact(self, request: PlanRequest, positions: np.ndarray) -> SafetyFigures:
         separator = None
         if request.num_obstacles:
-            close = _coincident(positions, request.obstacle_means)
-            separator = None if np.any(close) else self.separator(request, positions, close)
+            nudged, res = self._separation(request, positions)
+            separator = None if nudged else res   # at a coincident mean: the exact figures of the un-nudged pair
         return exact_safety(request, positions, self.drone_radius_m, self.wall_radius, separator)
 
     @staticmethod
