@@ -83,8 +83,9 @@ def _project_forward(v, v0, vmax, da):
 
     A forward pass from ``V_0 = v0``: each row is clipped to within ``da`` (``a_max tau``)
     of the projected row before it, then to the speed box. A sequential recursion, so one
-    compiled loop (or, without numba, this function in Python); ``lo if x < lo`` and
-    ``hi if x > hi`` are Python's ``max(x, lo)`` and ``min(x, hi)`` exactly.
+    compiled loop (or, without numba, this function in Python); ``lo if lo > x else x``
+    and ``hi if hi < x else x`` are Python's ``max(x, lo)`` and ``min(x, hi)`` exactly
+    (the values the list-based loop this replaces produced, signed zeros included).
     """
     for i in range(v.shape[0]):
         for k in range(3):
