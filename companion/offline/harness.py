@@ -18,6 +18,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from companion.core import jit
 from companion.loop.app import Companion
 from companion.mavlink.link import MemoryLink
 from companion.mavlink.offboard import OffboardConfig
@@ -100,6 +101,7 @@ def run_lockstep(
         config, sim_scenario = _parse(scenario, planner_overrides)
         sim = LockstepSimulator(sim_scenario, seed=seed, tlog=sim_tlog_path)
     companion = Companion(config, offboard=offboard)
+    jit.warm_up()  # load the compiled kernels now, not inside the first solve (its reported solve time)
     link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path, tlog_offset_s=LOCKSTEP_EPOCH_S)
     # Obstacles with transport = "link" arrive on their own receive-only link, as on a vehicle.
     # Recorded in the same tlog (replay routes other systems' traffic back to an obstacle link).
