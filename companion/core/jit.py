@@ -10,20 +10,40 @@ process and the setpoint stream call :func:`warm_up` before their first request.
 
 The compiled functions do the operations of the Python or numpy code they replace in
 the same order, so their results are the same bits (each is tested so); without numba
-(:data:`COMPILED` false) that code runs instead.
+(:func:`available` false) that code runs instead.
 """
 
 from __future__ import annotations
 
 import functools
 import importlib.util
+import logging
 from types import ModuleType
 from typing import Callable
 
-#: Whether numba is installed (then the registered functions are compiled).
+logger = logging.getLogger(__name__)
+
+#: Whether numba is installed (then the registered functions are compiled, if it imports).
 COMPILED = importlib.util.find_spec("numba") is not None
 
 _REGISTERED: list[Callable[[], Callable]] = []
+
+
+@functools.cache
+def available() -> bool:
+    """Whether the compiled functions can be used: numba installed and importing (imported here, once).
+
+    A numba that does not import (for example one built for another numpy) is logged once
+    and the Python and numpy code runs instead, with the same results.
+    """
+    if not COMPILED:
+        return False
+    try:
+        import numba  # noqa: F401
+    except ImportError as exc:
+        logger.warning("numba does not import (%s): the planner runs its numpy code instead", exc)
+        return False
+    return True
 
 
 def lazy(signature: Callable[[ModuleType], object]) -> Callable[[Callable], Callable[[], Callable]]:
@@ -56,6 +76,6 @@ def readonly(types: ModuleType, ndim: int) -> object:
 
 def warm_up() -> None:
     """Compile or load every registered function now (a no-op without numba or when already done)."""
-    if COMPILED:
+    if available():
         for compiled in _REGISTERED:
             compiled()

@@ -360,14 +360,17 @@ def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> 
 
 
 def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...],
-            compiled: bool = jit.COMPILED) -> MinmaxResult:
+            compiled: bool | None = None) -> MinmaxResult:
     """:func:`minmax` on validated batch-last inputs: means (d, n), covariances (d, d, n).
 
     ``compiled``: 3x3 pairs go through the compiled kernel (:mod:`companion.core.minmax_kernel`,
-    the same operations per pair, so the same bits) when numba is installed; ``False`` runs
-    the vectorised numpy kernel below (the tests compare the two bit for bit).
+    the same operations per pair, so the same bits); ``None`` (default) does so when numba
+    is available, ``False`` runs the vectorised numpy kernel below (the tests compare the two
+    bit for bit).
     """
     d, n = m1.shape
+    if compiled is None:
+        compiled = jit.available()
     if d == 3 and compiled and isinstance(S1, np.ndarray):
         fields, stalled = minmax_kernel.minmax3(m1, m2, S1, S2, _U_TOL, _MAX_NEWTON)
         if stalled:

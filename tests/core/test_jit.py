@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -23,7 +25,7 @@ def _clip_reference(v: np.ndarray, v0: np.ndarray, vmax: np.ndarray, da: np.ndar
 @settings(max_examples=40, deadline=None, derandomize=True)
 @given(st.integers(0, 2**32 - 1))
 def test_that_the_compiled_forward_projection_gives_the_python_bits(seed):
-    if not jit.COMPILED:
+    if not jit.available():
         pytest.fail("numba is a runtime dependency: the compiled kernels must be available")
     rng = np.random.default_rng(seed)
     n = int(rng.integers(1, 60))
@@ -46,3 +48,31 @@ def test_that_warm_up_loads_every_registered_kernel():
     jit.warm_up()
     for compiled in jit._REGISTERED:
         assert compiled.cache_info().currsize == 1
+
+
+def test_that_a_numba_that_does_not_import_leaves_the_numpy_code_with_the_same_answers(monkeypatch, caplog):
+    from companion.core import overlap
+
+    rng = np.random.default_rng(5)
+    q = np.linalg.qr(rng.standard_normal((8, 3, 3)))[0]
+    covs = np.einsum("nij,nj,nkj->nik", q, 10.0 ** rng.uniform(-2, 2, (8, 3)), q)
+    mu1, mu2 = rng.standard_normal((4, 3)), rng.standard_normal((4, 3)) * 3.0
+    compiled = overlap.minmax(mu1, covs[:4], mu2, covs[4:])
+    v, v0, vmax, da = rng.normal(0.0, 3.0, (6, 3)), np.zeros(3), np.full(3, 2.0), np.full(3, 0.6)
+    jit.available.cache_clear()
+    monkeypatch.setitem(sys.modules, "numba", None)    # "import numba" now raises ImportError
+    try:
+        assert not jit.available()
+        assert "numba does not import" in caplog.text
+        jit.warm_up()                                  # a no-op, not an error
+        fallback = overlap.minmax(mu1, covs[:4], mu2, covs[4:])
+    finally:
+        monkeypatch.undo()
+        jit.available.cache_clear()
+    assert jit.available()
+    for field in ("lam", "eta", "alpha", "beta", "normal", "s1", "s2"):
+        np.testing.assert_allclose(getattr(fallback, field), getattr(compiled, field), rtol=1e-12, atol=1e-15,
+                                   err_msg=field)
+    python = v.copy()
+    scp._project_forward.py_func(python, v0, vmax, da)     # the projection's fallback is its Python original
+    np.testing.assert_array_equal(python, _clip_reference(v, v0, vmax, da))

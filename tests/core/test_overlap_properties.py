@@ -133,7 +133,7 @@ def test_that_the_compiled_kernel_gives_the_numpy_kernels_bits(seed):
     from companion.core import jit, overlap
     import companion.core.small_matrix as K
 
-    if not jit.COMPILED:
+    if not jit.available():
         pytest.fail("numba is a runtime dependency: the compiled minmax kernel must be available")
     rng = np.random.default_rng(seed)
     n = 60

@@ -248,7 +248,7 @@ class Planner:
         out = np.array(v, dtype=float)
         v0 = np.ascontiguousarray(v0, dtype=float)
         vmax, da = np.ascontiguousarray(cfg.velocity_max, dtype=float), np.ascontiguousarray(cfg.accel_max * tau)
-        (_project_forward() if jit.COMPILED else _project_forward.py_func)(out, v0, vmax, da)
+        (_project_forward() if jit.available() else _project_forward.py_func)(out, v0, vmax, da)
         return out
 
     # ------------------------------------------------------------------ internals
