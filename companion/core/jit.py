@@ -4,7 +4,7 @@ A function registered with :func:`lazy` is compiled for its one signature the fi
 it is asked for, or loaded from numba's disk cache (``cache=True``: next to its source
 file, else in the user's cache directory). Only the first process after an install or a
 change of the file compiles (about 2 s per function); later processes import numba and
-load the machine code (about 1 s in all on a quiet 2-core machine). numba is imported on
+load the machine code (0.5 to 1 s in all on a quiet 2-core machine). numba is imported on
 first use only, so commands that never plan do not pay for it; the real-time planning
 process and the setpoint stream call :func:`warm_up` before their first request.
 

@@ -16,7 +16,7 @@ follows it in ``_minmax``), written per pair instead of per whole array:
 
 So the results are the numpy kernel's bits (the tests compare them bit for bit on
 platforms whose numpy ``exp``/``log`` are the C library's, as on x86-64 without AVX-512;
-elsewhere to 1e-13), and a replay, a campaign or a figure does not depend on which kernel
+elsewhere to 1e-12), and a replay, a campaign or a figure does not depend on which kernel
 ran. Per pair it is a few hundred scalar operations with no temporary arrays: the planner's
 120 pairs per call cost microseconds instead of the ~300 whole-array numpy calls of the
 vectorised kernel (docs/PERFORMANCE.md).
@@ -35,6 +35,7 @@ import math
 import numpy as np
 
 from companion.core import jit
+
 
 def _signature(t):
     """Means (3, n) and covariances (3, 3, n) in, then the outputs (n,) and (3, n); returns an int."""
