@@ -76,3 +76,35 @@ def test_that_a_numba_that_does_not_import_leaves_the_numpy_code_with_the_same_a
     python = v.copy()
     scp._project_forward.py_func(python, v0, vmax, da)     # the projection's fallback is its Python original
     np.testing.assert_array_equal(python, _clip_reference(v, v0, vmax, da))
+
+
+@pytest.mark.parametrize("formulation", ["hyperplane", "paper", "bhattacharyya"])
+def test_that_plans_are_the_same_bits_with_and_without_the_compiled_kernels(formulation, monkeypatch):
+    from companion.core.planner import Planner
+    from tests.core.test_overlap_properties import _libm_transcendentals
+    from tests.core.test_planner_scp import scenario_one
+
+    if not _libm_transcendentals():
+        pytest.skip("numpy's own SIMD exp/log here: the numpy kernel's last bits differ from the C library's")
+    cfg, req = scenario_one(formulation)
+
+    def fly() -> list:
+        planner, plans, warm = Planner(cfg), [], None
+        for _ in range(3):                          # a cold plan, then two warm-started replans
+            warm = planner.solve(req, warm_start=warm)
+            plans.append(warm)
+        return plans
+
+    compiled = fly()
+    jit.available.cache_clear()
+    monkeypatch.setattr(jit, "COMPILED", False)     # as without numba: the numpy and Python code
+    try:
+        assert not jit.available()
+        numpy_plans = fly()
+    finally:
+        monkeypatch.undo()
+        jit.available.cache_clear()
+    for a, b in zip(compiled, numpy_plans):
+        assert a.status == b.status and a.iterations == b.iterations
+        for field in ("velocities", "positions", "commands", "eta", "contour_of_touch"):
+            assert np.asarray(getattr(a, field)).tobytes() == np.asarray(getattr(b, field)).tobytes(), field
