@@ -107,8 +107,11 @@ class ConstantVelocityFilter:
         kf = self._kf
         x0, P0 = kf.x, kf.P  # filterpy replaces x and P with new arrays: these stay the estimate at self.t_s
         F, Q = self._model(dt)
-        kf.predict(F=F, Q=Q)  # x = F x;  P = F P F' + Q
-        kf.update(m.z, R=m.R, H=m.H)  # Joseph form, see module docstring; keeps y = z - H x and S^-1
+        # F, Q and R are set on the filter rather than passed: filterpy then skips its
+        # isscalar() checks of Q and R (same arithmetic, a few microseconds a report)
+        kf.F, kf.Q, kf.R = F, Q, m.R
+        kf.predict()  # x = F x;  P = F P F' + Q
+        kf.update(m.z, H=m.H)  # Joseph form, see module docstring; keeps y = z - H x and S^-1
         nis = float(kf.y @ kf.SI @ kf.y)  # NIS = y' S^-1 y, S = H P H' + R of the prediction
         dof = m.z.size
         if self._gate is not None and not nis <= self._gate[dof]:
