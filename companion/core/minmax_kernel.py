@@ -40,18 +40,18 @@ from companion.core import jit
 def _signature(t):
     """Means (3, n) and covariances (3, 3, n) in, then the outputs (n,) and (3, n); returns an int."""
     r2, r3, w1, w2 = jit.readonly(t, 2), jit.readonly(t, 3), t.float64[::1], t.float64[:, ::1]
-    return t.int64(r2, r2, r3, r3, t.float64, t.int64, w1, w1, w1, w2, w1, w2, w1, w1, w2, t.int8[::1])
+    return t.int64(r2, r2, r3, r3, t.float64, t.int64, w1, w1, w1, w2, w1, w2, w1, w1, w2)
 
 
 @jit.lazy(_signature)
 def _minmax3(m1, m2, s1, s2, u_tol, max_newton,
-             lam, eta, residual, alpha, beta, normal, sc1, sc2, grad, coincident):
+             lam, eta, residual, alpha, beta, normal, sc1, sc2, grad):
     """Per pair ``p`` of 3-D Gaussians ``N(m1, s1)``, ``N(m2, s2)``: the minmax separator.
 
     Inputs (batch last): means ``m1``, ``m2`` (3, n) in metres; covariances ``s1``, ``s2``
     (3, 3, n), symmetric positive definite, square metres. Writes ``lam``, ``eta``,
     ``residual`` (``eta1 - eta2``), ``beta``, ``sc1``, ``sc2`` (the support scales
-    ``sqrt(x'S x) / |x|``), ``coincident`` (1 where the means coincide) as (n,) and
+    ``sqrt(x'S x) / |x|``) as (n,) and
     ``alpha``, ``normal``, ``grad`` (``d eta / d mu1``) as (3, n). Returns the number of
     pairs whose Newton iteration ran ``max_newton`` steps without converging.
     """
@@ -170,7 +170,6 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton,
         alpha[0, p], alpha[1, p], alpha[2, p] = al0, al1, al2
         normal[0, p], normal[1, p], normal[2, p] = n0, n1, n2
         grad[0, p], grad[1, p], grad[2, p] = -n0 / ksum, -n1 / ksum, -n2 / ksum
-        coincident[p] = 1 if same else 0
     return stalled
 
 
@@ -190,7 +189,7 @@ def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
     Returns
     -------
     fields : dict
-        ``lam``, ``eta``, ``residual``, ``beta``, ``s1``, ``s2``, ``coincident`` (n,) and
+        ``lam``, ``eta``, ``residual``, ``beta``, ``s1``, ``s2`` (n,) and
         ``alpha``, ``normal``, ``eta_grad_mu1`` (3, n).
     stalled : int
         Pairs whose iteration hit ``max_newton`` steps.
@@ -198,9 +197,8 @@ def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
     n = m1.shape[1]
     out = {name: np.empty(n) for name in ("lam", "eta", "residual", "beta", "s1", "s2")}
     out.update({name: np.empty((3, n)) for name in ("alpha", "normal", "eta_grad_mu1")})
-    out["coincident"] = np.empty(n, dtype=np.int8)
     stalled = _minmax3()(np.ascontiguousarray(m1), np.ascontiguousarray(m2), np.ascontiguousarray(s1),
                           np.ascontiguousarray(s2), float(u_tol), int(max_newton),
                           out["lam"], out["eta"], out["residual"], out["alpha"], out["beta"], out["normal"],
-                          out["s1"], out["s2"], out["eta_grad_mu1"], out["coincident"])
+                          out["s1"], out["s2"], out["eta_grad_mu1"])
     return out, int(stalled)

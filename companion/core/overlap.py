@@ -375,7 +375,6 @@ def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...],
         fields, stalled = minmax_kernel.minmax3(m1, m2, S1, S2, _U_TOL, _MAX_NEWTON)
         if stalled:
             logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", _MAX_NEWTON, stalled)
-        del fields["coincident"]
         return MinmaxResult(**{name: (v.reshape(lead) if v.ndim == 1 else v.T.reshape(lead + (d,)))
                                for name, v in fields.items()})
     delta = m2 - m1
