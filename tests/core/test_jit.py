@@ -1,7 +1,8 @@
-"""The compiled hot loops (companion.core.jit): each gives its Python original's bits."""
+"""The compiled hot loops (companion.core.jit): each gives its Python or numpy original's bits."""
 
 from __future__ import annotations
 
+import math
 import sys
 
 import numpy as np
@@ -9,8 +10,39 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from companion.core import jit
-from companion.core.planner import scp
+import companion.core.small_matrix as K
+from companion.core import jit, overlap
+from companion.core.planner import Planner, scp
+from tests.core.test_planner_scp import scenario_one
+
+
+def _libm_transcendentals() -> bool:
+    """Whether numpy's float64 exp and log give the C library's bits here (then the kernels agree bit for bit)."""
+    x = np.random.default_rng(0).uniform(-30.0, 30.0, 20000)
+    return (np.array_equal(np.exp(x), [math.exp(v) for v in x])
+            and np.array_equal(np.log(np.exp(x)), [math.log(v) for v in np.exp(x)]))
+
+
+def _require_compiled() -> None:
+    if not jit.available():
+        pytest.fail("numba is a runtime dependency: the compiled kernels must be available")
+
+
+def _random_covariances(rng: np.random.Generator, n: int, decades: float) -> np.ndarray:
+    """``n`` random 3x3 covariances, eigenvalues log-uniform over ``10**[-decades, decades]``."""
+    q = np.linalg.qr(rng.standard_normal((n, 3, 3)))[0]
+    return np.einsum("nij,nj,nkj->nik", q, 10.0 ** rng.uniform(-decades, decades, (n, 3)), q)
+
+
+@pytest.fixture
+def numpy_only(monkeypatch):
+    """From when it is requested, ``import numba`` fails: the code runs as on a machine without a working numba."""
+    jit.available.cache_clear()
+    monkeypatch.setitem(sys.modules, "numba", None)    # "import numba" now raises ImportError
+    yield
+    monkeypatch.undo()
+    jit.available.cache_clear()
+    assert jit.available()
 
 
 def _clip_reference(v: np.ndarray, v0: np.ndarray, vmax: np.ndarray, da: np.ndarray) -> np.ndarray:
@@ -22,11 +54,36 @@ def _clip_reference(v: np.ndarray, v0: np.ndarray, vmax: np.ndarray, da: np.ndar
     return out
 
 
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1))
+def test_that_the_compiled_minmax_gives_the_numpy_kernels_bits(seed):
+    _require_compiled()
+    rng = np.random.default_rng(seed)
+    n = 60
+    covs = _random_covariances(rng, 2 * n, 3.0)
+    covs[n + 1] = 2.5 * covs[1]      # S2 a multiple of S1: the start is the root
+    mu1 = rng.standard_normal((n, 3)) * 10.0
+    mu2 = mu1 + rng.standard_normal((n, 3)) * rng.uniform(1e-3, 50.0, (n, 1))
+    mu2[0] = mu1[0]                  # coincident means: eta 0, a fixed direction
+    pairs = overlap.CovariancePairs.from_arrays(covs[:n], covs[n:])
+    m1, m2 = K.vectors_to_components(mu1), K.vectors_to_components(mu2)
+    fast = overlap._minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead, compiled=True)
+    slow = overlap._minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead, compiled=False)
+    exact = _libm_transcendentals()
+    for field in ("lam", "eta", "alpha", "beta", "normal", "s1", "s2", "eta_grad_mu1", "residual"):
+        a, b = getattr(fast, field), getattr(slow, field)
+        assert a.shape == b.shape, field
+        if exact:
+            np.testing.assert_array_equal(a, b, err_msg=field)
+        else:  # numpy's own SIMD exp/log (AVX-512): the last bits may differ
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-14, err_msg=field)
+    assert fast.eta[0] == 0.0 and np.all(fast.alpha[0] == 0.0)
+
+
 @settings(max_examples=40, deadline=None, derandomize=True)
 @given(st.integers(0, 2**32 - 1))
 def test_that_the_compiled_forward_projection_gives_the_python_bits(seed):
-    if not jit.available():
-        pytest.fail("numba is a runtime dependency: the compiled kernels must be available")
+    _require_compiled()
     rng = np.random.default_rng(seed)
     n = int(rng.integers(1, 60))
     v = rng.normal(0.0, 3.0, (n, 3))
@@ -50,26 +107,17 @@ def test_that_warm_up_loads_every_registered_kernel():
         assert compiled.cache_info().currsize == 1
 
 
-def test_that_a_numba_that_does_not_import_leaves_the_numpy_code_with_the_same_answers(monkeypatch, caplog):
-    from companion.core import overlap
-
+def test_that_a_numba_that_does_not_import_leaves_the_numpy_code_with_the_same_answers(request, caplog):
     rng = np.random.default_rng(5)
-    q = np.linalg.qr(rng.standard_normal((8, 3, 3)))[0]
-    covs = np.einsum("nij,nj,nkj->nik", q, 10.0 ** rng.uniform(-2, 2, (8, 3)), q)
+    covs = _random_covariances(rng, 8, 2.0)
     mu1, mu2 = rng.standard_normal((4, 3)), rng.standard_normal((4, 3)) * 3.0
     compiled = overlap.minmax(mu1, covs[:4], mu2, covs[4:])
     v, v0, vmax, da = rng.normal(0.0, 3.0, (6, 3)), np.zeros(3), np.full(3, 2.0), np.full(3, 0.6)
-    jit.available.cache_clear()
-    monkeypatch.setitem(sys.modules, "numba", None)    # "import numba" now raises ImportError
-    try:
-        assert not jit.available()
-        assert "numba does not import" in caplog.text
-        jit.warm_up()                                  # a no-op, not an error
-        fallback = overlap.minmax(mu1, covs[:4], mu2, covs[4:])
-    finally:
-        monkeypatch.undo()
-        jit.available.cache_clear()
-    assert jit.available()
+    request.getfixturevalue("numpy_only")
+    assert not jit.available()
+    assert "numba does not import" in caplog.text
+    jit.warm_up()                                  # a no-op, not an error
+    fallback = overlap.minmax(mu1, covs[:4], mu2, covs[4:])
     for field in ("lam", "eta", "alpha", "beta", "normal", "s1", "s2"):
         np.testing.assert_allclose(getattr(fallback, field), getattr(compiled, field), rtol=1e-12, atol=1e-15,
                                    err_msg=field)
@@ -79,11 +127,7 @@ def test_that_a_numba_that_does_not_import_leaves_the_numpy_code_with_the_same_a
 
 
 @pytest.mark.parametrize("formulation", ["hyperplane", "paper", "bhattacharyya"])
-def test_that_plans_are_the_same_bits_with_and_without_the_compiled_kernels(formulation, monkeypatch):
-    from companion.core.planner import Planner
-    from tests.core.test_overlap_properties import _libm_transcendentals
-    from tests.core.test_planner_scp import scenario_one
-
+def test_that_plans_are_the_same_bits_with_and_without_the_compiled_kernels(formulation, request):
     if not _libm_transcendentals():
         pytest.skip("numpy's own SIMD exp/log here: the numpy kernel's last bits differ from the C library's")
     cfg, req = scenario_one(formulation)
@@ -96,14 +140,9 @@ def test_that_plans_are_the_same_bits_with_and_without_the_compiled_kernels(form
         return plans
 
     compiled = fly()
-    jit.available.cache_clear()
-    monkeypatch.setattr(jit, "COMPILED", False)     # as without numba: the numpy and Python code
-    try:
-        assert not jit.available()
-        numpy_plans = fly()
-    finally:
-        monkeypatch.undo()
-        jit.available.cache_clear()
+    request.getfixturevalue("numpy_only")           # as without numba: the numpy and Python code
+    assert not jit.available()
+    numpy_plans = fly()
     for a, b in zip(compiled, numpy_plans):
         assert a.status == b.status and a.iterations == b.iterations
         for field in ("velocities", "positions", "commands", "eta", "contour_of_touch"):

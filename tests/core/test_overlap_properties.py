@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -117,43 +116,3 @@ def test_that_batch_results_equal_per_pair_results(seed, d):
         for field in ("alpha", "normal", "eta_grad_mu1"):
             np.testing.assert_allclose(getattr(batch, field)[i], getattr(single, field), rtol=1e-12, atol=1e-15, err_msg=field)
 
-
-def _libm_transcendentals() -> bool:
-    """Whether numpy's float64 exp and log give the C library's bits here (then the kernels agree bit for bit)."""
-    import math
-
-    x = np.random.default_rng(0).uniform(-30.0, 30.0, 20000)
-    return (np.array_equal(np.exp(x), [math.exp(v) for v in x])
-            and np.array_equal(np.log(np.exp(x)), [math.log(v) for v in np.exp(x)]))
-
-
-@settings(max_examples=25, deadline=None, derandomize=True)
-@given(st.integers(0, 2**32 - 1))
-def test_that_the_compiled_kernel_gives_the_numpy_kernels_bits(seed):
-    from companion.core import jit, overlap
-    import companion.core.small_matrix as K
-
-    if not jit.available():
-        pytest.fail("numba is a runtime dependency: the compiled minmax kernel must be available")
-    rng = np.random.default_rng(seed)
-    n = 60
-    q = np.linalg.qr(rng.standard_normal((2 * n, 3, 3)))[0]
-    ev = 10.0 ** rng.uniform(-3, 3, (2 * n, 3))
-    covs = np.einsum("nij,nj,nkj->nik", q, ev, q)
-    covs[n + 1] = 2.5 * covs[1]      # S2 a multiple of S1: the start is the root
-    mu1 = rng.standard_normal((n, 3)) * 10.0
-    mu2 = mu1 + rng.standard_normal((n, 3)) * rng.uniform(1e-3, 50.0, (n, 1))
-    mu2[0] = mu1[0]                  # coincident means: eta 0, a fixed direction
-    pairs = overlap.CovariancePairs.from_arrays(covs[:n], covs[n:])
-    m1, m2 = K.vectors_to_components(mu1), K.vectors_to_components(mu2)
-    fast = overlap._minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead, compiled=True)
-    slow = overlap._minmax(m1, m2, pairs.s1, pairs.s2, pairs.lead, compiled=False)
-    exact = _libm_transcendentals()
-    for field in ("lam", "eta", "alpha", "beta", "normal", "s1", "s2", "eta_grad_mu1", "residual"):
-        a, b = getattr(fast, field), getattr(slow, field)
-        assert a.shape == b.shape, field
-        if exact:
-            np.testing.assert_array_equal(a, b, err_msg=field)
-        else:  # numpy's own SIMD exp/log (AVX-512): the last bits may differ
-            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-14, err_msg=field)
-    assert fast.eta[0] == 0.0 and np.all(fast.alpha[0] == 0.0)
