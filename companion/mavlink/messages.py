@@ -467,7 +467,7 @@ def velocity_setpoint(
         If ``v_ned`` is not three finite numbers or ``yaw`` is not finite.
     """
     v = np.asarray(v_ned, dtype=float)
-    if v.shape != (3,) or not all(math.isfinite(x) for x in v.tolist()):
+    if v.shape != (3,) or not _finite3(v):
         raise InputError(f"velocity setpoint must be 3 finite m/s values (NED), got {v_ned!r}")
     if yaw is not None and not math.isfinite(float(yaw)):
         raise InputError(f"yaw setpoint must be finite radians, got {yaw!r}")
