@@ -22,6 +22,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Callable
 
 _CHILD = r"""
 import dataclasses, hashlib, json, sys, time
@@ -50,13 +51,36 @@ print(json.dumps(out))
 TIMEOUT_S = 1800.0
 
 
-def run_tree(tree: Path, episodes: str) -> tuple[float, list[tuple[float, str]]]:
-    """Start-up core-seconds, and (core-seconds, score digest) of each episode, flown by ``tree`` in a fresh process."""
-    proc = subprocess.run([sys.executable, "-c", _CHILD, str(tree), episodes], capture_output=True, text=True,
-                          cwd=tree, timeout=TIMEOUT_S)
+def child_json(code: str, tree: Path, *args: str, timeout_s: float = TIMEOUT_S):
+    """The JSON ``code`` prints last, run by the code in ``tree`` in a fresh interpreter (``sys.argv[1]`` is ``tree``)."""
+    proc = subprocess.run([sys.executable, "-c", code, str(tree), *args], capture_output=True, text=True,
+                          cwd=tree, timeout=timeout_s)
     if proc.returncode != 0:
         raise SystemExit(f"{tree}: {proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else proc.returncode}")
-    (warm, _), *episodes_run = json.loads(proc.stdout.strip().splitlines()[-1])
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def source_trees(paths: list[Path], marker: str, tool: str) -> list[Path] | None:
+    """``paths`` resolved, or None (said on stderr) when one has no ``marker`` file: not a tree of this project."""
+    for tree in paths:
+        if not (tree / marker).is_file():
+            print(f"{tool}: {tree} is not a source tree of this project (no {marker})", file=sys.stderr)
+            return None
+    return [tree.resolve() for tree in paths]
+
+
+def alternate(trees: list[Path], rounds: int, run: Callable[[Path], object]) -> dict[Path, list]:
+    """``run(tree)`` for each tree in each round, the order reversed every other round; results per tree."""
+    results: dict[Path, list] = {t: [] for t in trees}
+    for r in range(rounds):
+        for tree in trees if r % 2 == 0 else trees[::-1]:
+            results[tree].append(run(tree))
+    return results
+
+
+def run_tree(tree: Path, episodes: str) -> tuple[float, list[tuple[float, str]]]:
+    """Start-up core-seconds, and (core-seconds, score digest) of each episode, flown by ``tree`` in a fresh process."""
+    (warm, _), *episodes_run = child_json(_CHILD, tree, episodes)
     return float(warm), [(float(c), str(h)) for c, h in episodes_run]
 
 
@@ -67,18 +91,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", default="0,1,2,3", help="episode indices (default 0,1,2,3)")
     ap.add_argument("--rounds", type=int, default=3, help="alternating rounds (default 3)")
     args = ap.parse_args(argv)
-    for tree in (args.old, args.new):
-        if not (tree / "companion" / "__init__.py").is_file():
-            print(f"ab_episode: {tree} is not a source tree of this project (no companion/__init__.py)", file=sys.stderr)
-            return 2
-    trees = [args.old.resolve(), args.new.resolve()]
-    runs: dict[Path, list] = {t: [] for t in trees}
-    warm: dict[Path, list[float]] = {t: [] for t in trees}
-    for r in range(args.rounds):
-        for tree in trees if r % 2 == 0 else trees[::-1]:
-            start_up, run = run_tree(tree, args.episodes)
-            warm[tree].append(start_up)
-            runs[tree].append(run)
+    trees = source_trees([args.old, args.new], "companion/__init__.py", "ab_episode")
+    if trees is None:
+        return 2
+    results = alternate(trees, args.rounds, lambda tree: run_tree(tree, args.episodes))
+    warm = {t: [start_up for start_up, _ in results[t]] for t in trees}
+    runs = {t: [run for _, run in results[t]] for t in trees}
     mean = {t: sum(c for run in runs[t] for c, _ in run) / sum(len(run) for run in runs[t]) for t in trees}
     digests = {t: [h for _, h in runs[t][0]] for t in trees}
     for t, label in zip(trees, ("old", "new")):

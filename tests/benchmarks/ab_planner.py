@@ -18,10 +18,10 @@ speed drifts between runs.
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
 import sys
 from pathlib import Path
+
+from tests.benchmarks.ab_episode import alternate, child_json, source_trees
 
 _CHILD = r"""
 import hashlib, json, sys
@@ -51,11 +51,7 @@ TIMEOUT_S = 900.0
 
 def run_tree(tree: Path) -> tuple[float, float, float, str]:
     """(median ms, p99 ms, replan / OSQP time, plans digest) of the benchmark flown by the code in ``tree``."""
-    proc = subprocess.run([sys.executable, "-c", _CHILD, str(tree)], capture_output=True, text=True, cwd=tree,
-                          timeout=TIMEOUT_S)
-    if proc.returncode != 0:
-        raise SystemExit(f"{tree}: {proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else proc.returncode}")
-    median, p99, ratio, digest = json.loads(proc.stdout.strip().splitlines()[-1])
+    median, p99, ratio, digest = child_json(_CHILD, tree, timeout_s=TIMEOUT_S)
     return float(median), float(p99), float(ratio), str(digest)
 
 
@@ -65,16 +61,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("new", type=Path, help="source tree of the new code")
     ap.add_argument("--rounds", type=int, default=3, help="alternating rounds (default 3)")
     args = ap.parse_args(argv)
-    for tree in (args.old, args.new):
-        if not (tree / "tests" / "benchmarks" / "bench_planner.py").is_file():
-            print(f"ab_planner: {tree} is not a source tree of this project (no tests/benchmarks/bench_planner.py)",
-                  file=sys.stderr)
-            return 2
-    trees = [args.old.resolve(), args.new.resolve()]
-    runs: dict[Path, list] = {t: [] for t in trees}
-    for r in range(args.rounds):
-        for tree in trees if r % 2 == 0 else trees[::-1]:
-            runs[tree].append(run_tree(tree))
+    trees = source_trees([args.old, args.new], "tests/benchmarks/bench_planner.py", "ab_planner")
+    if trees is None:
+        return 2
+    runs = alternate(trees, args.rounds, run_tree)
     for t, label in zip(trees, ("old", "new")):
         rounds = runs[t]
         print(f"{label} {t}: median {' '.join(f'{m:.2f}' for m, _, _, _ in rounds)} ms; "
