@@ -56,8 +56,10 @@ Outbox = list[mavlink2.MAVLink_message]
 #: STATUSTEXT when the autopilot's TIMESYNC answers disagree with its pose stamps (<= 50 characters).
 CLOCK_DISAGREES_TEXT = "companion: TIMESYNC off pose clock, using arrivals"
 
-#: NAMED_VALUE_FLOAT sent at the tick a plan arrives when that is later than its request
-#: (real time): the value is the replan's number, so a replay applies it at the same tick.
+#: NAMED_VALUE_FLOAT sent at the tick a plan arrives from an asynchronous planning service
+#: (real time; :attr:`~companion.loop.planning.PlanningService.asynchronous`), also when that
+#: is the tick of its request: the value is the replan's number, so a replay applies it at
+#: the same tick.
 PLAN_ARRIVED = "plan_seq"
 #: NAMED_VALUE_FLOAT sent at the tick a job came back without a plan (the planning process
 #: raised): the value is the replan's number, so a replay drops that job at the same tick.
@@ -269,7 +271,9 @@ class Companion:
     def _collect_plans(self, t_s: float, *, apply: bool) -> Outbox:
         """Take the plans that arrived; adopt them, or discard them (not in control, estimate stale).
 
-        A plan arriving at a later tick than its request is announced (:data:`PLAN_ARRIVED`).
+        Every plan from an asynchronous service is announced (:data:`PLAN_ARRIVED`). Its arrival
+        tick is a race with the stream: a fast solve can be back before the tick that asked for
+        it collects, and that arrival is announced too, or a replay would wait for it forever.
         """
         said: Outbox = []
         for result in self.planning.collect():
@@ -277,7 +281,7 @@ class Companion:
                 said.append(messages.named_value_float(int(round(t_s * 1000)), PLAN_LOST, float(result.job.seq)))
                 logger.warning("replan %d came back without a plan (planner error); the plan in force stays", result.job.seq)
                 continue
-            if result.job.t_link_s != t_s:
+            if self.planning.asynchronous:
                 said.append(messages.named_value_float(int(round(t_s * 1000)), PLAN_ARRIVED, float(result.job.seq)))
             self._arrival_delays.append(t_s - result.job.t_link_s)
             if apply:

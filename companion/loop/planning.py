@@ -34,6 +34,11 @@ class PlanningService(Protocol):
     """Where the loop sends replans and picks up plans."""
 
     planner: Planner  #: the planner that solves; the loop reads only its vehicle model (``planner.lag``)
+    #: False: every plan comes back in the tick that asked for it (lockstep), and arrivals go
+    #: unannounced. True: a plan comes back at whatever tick collects it, the asking one
+    #: included, and the loop announces every arrival (:data:`~companion.loop.app.PLAN_ARRIVED`)
+    #: so a replay applies it at the same tick.
+    asynchronous: bool
 
     @property
     def busy(self) -> bool:
@@ -48,6 +53,8 @@ class PlanningService(Protocol):
 
 class InlinePlanning:
     """Solve at :meth:`submit`; :meth:`collect` hands the plan back at once (lockstep, replay)."""
+
+    asynchronous = False
 
     def __init__(self, planner: Planner) -> None:
         self.planner = planner

@@ -109,6 +109,8 @@ class PlanWorker:
         :class:`~companion.core.planner.Planner`); a module-level callable (it is pickled).
     """
 
+    asynchronous = True  #: a plan is collected at whatever tick finds it back, the asking one included
+
     def __init__(self, config: PlannerConfig, *, make_planner: Callable[[PlannerConfig], Planner] = Planner) -> None:
         self.planner = Planner(config)  # the stream side's copy: only its vehicle model (``lag``) is read
         self.stats = WorkerStats()

@@ -54,8 +54,9 @@ the link's clock when each packet was sent (a few microseconds after the tick's 
 clock reading), so its replay agrees only to that timing.
 
 Plans in real time. ``companion fly`` plans in a process beside the stream, so a plan
-is applied some ticks after its request; the tick it arrived at carries a
-NAMED_VALUE_FLOAT ``plan_seq`` (:data:`companion.loop.app.PLAN_ARRIVED`). A log with such
+is applied at the tick that collects it, usually some ticks after its request; that tick
+carries a NAMED_VALUE_FLOAT ``plan_seq`` (:data:`companion.loop.app.PLAN_ARRIVED`), also
+when it is the request's own. A log with such
 announcements is replayed with :class:`~companion.offline.replay_stand_ins.RecordedArrivals`:
 each plan is solved when its arrival comes and applied at that tick, so a real-time log
 reproduces its commands exactly. Lockstep logs have none: plans apply at their request's tick.

@@ -72,8 +72,8 @@ class AssumeEngaged:
 class RecordedArrivals:
     """The :class:`~companion.loop.planning.PlanningService` of a replay of a real-time log.
 
-    In real time a plan arrives some ticks after its request, and ``companion fly``
-    announces the arrival (NAMED_VALUE_FLOAT :data:`~companion.loop.app.PLAN_ARRIVED`,
+    In real time a plan arrives some ticks after its request (or, when the solve beats the
+    stream, in the tick of its request), and ``companion fly`` announces every arrival (NAMED_VALUE_FLOAT :data:`~companion.loop.app.PLAN_ARRIVED`,
     the replan's number). The replay sets :attr:`arrivals` from the recorded tick before
     each tick; a job is solved when its arrival comes, so the replayed planner solves the
     same jobs in the same order as the recorded one (its warm starts match) and its plan
@@ -84,6 +84,8 @@ class RecordedArrivals:
     request until its recorded arrival or loss, as the recorded planning process was, so
     the replayed loop builds its requests at the recorded ticks.
     """
+
+    asynchronous = True  #: announces its arrivals as the recorded planning service did
 
     def __init__(self, planner: Planner) -> None:
         self.planner = planner
