@@ -114,6 +114,29 @@ def test_that_ctrl_c_ends_a_campaign_promptly_keeping_every_finished_run(tmp_pat
     assert 1 <= len(rows) < 100, (len(rows), took)
 
 
+def test_that_a_pool_worker_takes_ctrl_c_in_a_run_and_ignores_it_while_it_waits_for_one():
+    """Ctrl-C reaches every process of the group. A worker waiting for its next run used to die
+    in the pool's queue read, with a traceback on the terminal (a clean-clone CI run failed the
+    test above on it); now only a run in flight is interrupted, and the worker lives on."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from companion.offline.campaign.run import _take_interrupts_only_in_runs, interruptible
+
+    with ProcessPoolExecutor(max_workers=1, initializer=_take_interrupts_only_in_runs) as pool:
+        pid = pool.submit(os.getpid).result(timeout=30)
+        time.sleep(0.5)  # back in its wait for the next run
+        os.kill(pid, signal.SIGINT)
+        time.sleep(0.5)
+        assert pool.submit(os.getpid).result(timeout=30) == pid
+        run = pool.submit(interruptible, time.sleep, 30.0)
+        deadline = time.monotonic() + 10.0
+        while not run.done() and time.monotonic() < deadline:  # until the run has started and taken it
+            os.kill(pid, signal.SIGINT)
+            time.sleep(0.2)
+        assert run.done() and isinstance(run.exception(timeout=0), KeyboardInterrupt)
+        assert pool.submit(os.getpid).result(timeout=30) == pid
+
+
 def test_that_the_results_file_keeps_what_it_holds_and_drops_an_unfinished_line(tmp_path):
     path = tmp_path / "r.jsonl"
     header = campaign_header("crossing", 3, 0.9, 6.0)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import time
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -103,8 +104,41 @@ def open_executor(workers: int, scheduler: str | None = None) -> Iterator[tuple[
     elif workers == 1:
         yield None, 1
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        with ProcessPoolExecutor(max_workers=workers, initializer=_take_interrupts_only_in_runs) as pool:
             yield pool, workers
+
+
+_in_run = False  # a local pool worker's: inside :func:`interruptible`
+
+
+def _take_interrupts_only_in_runs() -> None:
+    """A local pool worker's Ctrl-C handler: it interrupts a run, never the worker's wait for one.
+
+    Ctrl-C in a terminal reaches the whole process group. Python's default interrupted a
+    worker anywhere: one waiting for its next run died in the pool's queue read with a
+    traceback on the terminal (a clean-clone CI run's Ctrl-C test failed on it), and one
+    that died holding the queue's lock could leave the other workers waiting for it. Now a
+    worker between runs ignores Ctrl-C (the campaign process cancels the queued runs and
+    shuts the pool down), and a run in flight is interrupted as before.
+    """
+    signal.signal(signal.SIGINT, _interrupt_run)
+
+
+def _interrupt_run(signum: int, frame) -> None:
+    global _in_run
+    if _in_run:
+        _in_run = False  # once per run: a second Ctrl-C while the run unwinds is not raised into the unwinding
+        raise KeyboardInterrupt
+
+
+def interruptible(fn: Callable, *args):
+    """``fn(*args)`` in a local pool worker, interruptible by Ctrl-C (:func:`_take_interrupts_only_in_runs`)."""
+    global _in_run
+    try:
+        _in_run = True
+        return fn(*args)
+    finally:
+        _in_run = False
 
 
 def _stop(futures: dict, take: Callable[[Future], None]) -> None:
@@ -177,7 +211,10 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
                 for task in todo:
                     finished(run_episode(task))
             else:
-                futures: dict[Future, EpisodeTask] = {executor.submit(run_episode, task): task for task in todo}
+                local = isinstance(executor, ProcessPoolExecutor)
+                futures: dict[Future, EpisodeTask] = {
+                    (executor.submit(interruptible, run_episode, task) if local else executor.submit(run_episode, task)): task
+                    for task in todo}
 
                 def take(fut: Future) -> None:
                     nonlocal lost
