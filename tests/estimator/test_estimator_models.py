@@ -33,6 +33,33 @@ def test_that_process_noise_is_the_van_loan_integral_of_white_acceleration():
     np.testing.assert_allclose(process_noise(dt, q), Q, rtol=1e-12, atol=1e-15)
 
 
+def _block_form(dt, q):
+    """``F(dt)`` and ``Q(dt)`` written by blocks, scalar times identity (as the models were first written)."""
+    i3 = np.eye(3)
+    F = np.eye(6)
+    F[:3, 3:] = dt * i3
+    Q = np.empty((6, 6))
+    Q[:3, :3] = q * dt**3 / 3.0 * i3
+    Q[:3, 3:] = q * dt**2 / 2.0 * i3
+    Q[3:, :3] = Q[:3, 3:]
+    Q[3:, 3:] = q * dt * i3
+    return F, Q
+
+
+def test_that_the_models_every_report_builds_are_the_block_forms_bit_for_bit():
+    """F and Q are built for every report (about 1 us each from a template, against 3 to 10 us by
+    blocks): the same bytes, signed zeros included, for any interval and noise level."""
+    rng = np.random.default_rng(7)
+    dts = [0.1, 0.09999999999999987, 0.3, 5e-324, 1e-300, 1e100, -0.1, 0.0, -0.0, np.inf, -np.inf, np.nan,
+           np.float64(0.05), 2, *rng.uniform(0.0, 2.0, 300), *(1e3 * rng.standard_normal(50))]
+    for dt in dts:
+        for q in (0.01, 0.5, 1e-300, 0.0, -0.0, 3.0, -1.0):
+            with np.errstate(all="ignore"):
+                F, Q = _block_form(dt, q)
+                assert transition_matrix(dt).tobytes() == F.tobytes(), dt
+                assert process_noise(dt, q).tobytes() == Q.tobytes(), (dt, q)
+
+
 def test_that_process_noise_matches_filterpy_continuous_white_noise():
     dt, q = 0.1, 2.0
     Q1 = Q_continuous_white_noise(dim=2, dt=dt, spectral_density=q, block_size=3, order_by_dim=False)
