@@ -51,8 +51,8 @@ def transition_matrix(dt_s: float) -> np.ndarray:
         ``[[I, dt I], [0, I]]``.
     """
     if 0.0 < dt_s < math.inf:
-        # Every report's path (a few microseconds against about 3): the entries of the general
-        # form below, whose off-diagonal dt * 0.0 is +0.0 for a positive finite dt
+        # Every report's path, about 1 us against 3 to 8 us by blocks: the general form's
+        # entries, whose off-diagonal dt * 0.0 is +0.0 for a positive finite dt
         F = _EYE.copy()
         F[0, 3] = F[1, 4] = F[2, 5] = dt_s
         return F
@@ -88,10 +88,10 @@ def process_noise(dt_s: float, accel_noise_psd_m2ps3: float) -> np.ndarray:
         Q[3, 3] = Q[4, 4] = Q[5, 5] = vv
         return Q
     Q = np.empty((STATE_DIM, STATE_DIM))
-    Q[:3, :3] = q * dt_s**3 / 3.0 * _I3
-    Q[:3, 3:] = q * dt_s**2 / 2.0 * _I3
+    Q[:3, :3] = pp * _I3
+    Q[:3, 3:] = pv * _I3
     Q[3:, :3] = Q[:3, 3:]
-    Q[3:, 3:] = q * dt_s * _I3
+    Q[3:, 3:] = vv * _I3
     return Q
 
 
