@@ -261,6 +261,10 @@ class CovariancePairs:
         m2 = np.broadcast_to(np.asarray(mu2, dtype=float), self.lead + (d,))
         return _minmax(K.vectors_to_components(m1), K.vectors_to_components(m2), self.s1, self.s2, self.lead)
 
+    def minmax_components(self, m1: Array, m2: Array) -> MinmaxResult:
+        """:meth:`minmax` with the means already laid out as (d, n) components, pair ``k`` of the flattened lead."""
+        return _minmax(m1, m2, self.s1, self.s2, self.lead)
+
 
 def _validate_pair(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> tuple[Array, Array, CovariancePairs]:
     """Check shapes, finiteness, symmetry and positive definiteness, once.

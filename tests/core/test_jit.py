@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import companion.core.small_matrix as K
 from companion.core import jit, overlap
-from companion.core.planner import Planner, scp
+from companion.core.planner import Planner, formulations, scp
 from tests.core.test_planner_scp import scenario_one
 
 
@@ -99,6 +99,32 @@ def test_that_the_compiled_forward_projection_gives_the_python_bits(seed):
     np.testing.assert_array_equal(compiled, _clip_reference(v, v0, vmax, da))
     steps = np.abs(np.diff(np.vstack([v0, compiled]), axis=0))
     assert np.all(np.abs(compiled) <= vmax) and np.all((steps <= da + 1e-12) | (np.abs(compiled) == vmax))
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1))
+def test_that_the_compiled_iterate_pairs_give_the_numpy_nudge_and_layout_bits(seed):
+    """The SCP's minmax inputs: the iterate against every obstacle mean, nudged off any it is
+    within 1e-6 m of, laid out as components; the same bytes as numpy's _coincident, _nudge
+    and vectors_to_components, at the nudge radius's edge and with signed zeros included."""
+    _require_compiled()
+    rng = np.random.default_rng(seed)
+    n_obs, n_steps = int(rng.integers(0, 5)), int(rng.integers(1, 41))
+    p_bar = rng.normal(0.0, 5.0, (n_steps, 3))
+    p_bar[rng.random((n_steps, 3)) < 0.1] = -0.0
+    means = p_bar[None] + rng.normal(0.0, 3.0, (n_obs, n_steps, 3))
+    kind = rng.integers(0, 4, (n_obs, n_steps))      # far, on the iterate, just inside, just outside 1e-6 m
+    direction = rng.normal(size=(n_obs, n_steps, 3))
+    direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
+    for code, scale in ((1, 0.0), (2, 1e-6 * (1.0 - 1e-12)), (3, 1e-6 * (1.0 + 1e-12))):
+        means[kind == code] = (p_bar[None] + scale * direction)[kind == code]
+    means.setflags(write=False)
+    m1, m2 = np.empty((3, n_obs * n_steps)), np.empty((3, n_obs * n_steps))
+    nudged = formulations._iterate_pairs()(p_bar, means, formulations._NUDGE_M, m1, m2)
+    close = formulations._coincident(p_bar, means)
+    assert nudged == bool(np.any(close))
+    reference = K.vectors_to_components(formulations._nudge(p_bar, means, close))
+    assert m1.tobytes() == reference.tobytes() and m2.tobytes() == K.vectors_to_components(means).tobytes()
 
 
 def test_that_warm_up_loads_every_registered_kernel():

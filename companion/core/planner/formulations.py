@@ -40,11 +40,12 @@ coefficients (the pattern stays the same).
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from companion.core import overlap
+from companion.core import jit, overlap
 from companion.core.planner.request import PlanRequest
 from companion.core.planner.safety import RECHECK_TOL_M, RECHECK_TOL_SIGMA, SafetyFigures, exact_safety
 
@@ -114,6 +115,38 @@ def _nudge(p_bar: np.ndarray, means: np.ndarray, close: np.ndarray | None = None
     out = np.broadcast_to(p_bar[None], means.shape).copy()
     out[close] -= np.array([1e-4, 1e-4, 0.0])
     return out
+
+
+def _iterate_pairs_signature(t):
+    """Iterate (N, 3) and obstacle means (P, N, 3) in, the pairs' means as (3, P N) components out."""
+    w2 = t.float64[:, ::1]
+    return t.boolean(jit.readonly(t, 2), jit.readonly(t, 3), t.float64, w2, w2)
+
+
+@jit.lazy(_iterate_pairs_signature)
+def _iterate_pairs(p_bar, means, nudge_m, m1, m2):
+    """:func:`_coincident`, :func:`_nudge` and the batch-last layout of the minmax's means in one pass.
+
+    Writes the (nudged) drone iterate ``p_bar`` (N, 3) against every obstacle mean ``means``
+    (P, N, 3) as components ``m1`` and ``m2`` (3, P N), pair ``j N + i``; returns whether any
+    iterate point was within ``nudge_m`` of a mean. The numpy functions' operations in their
+    order (the distance is numpy's norm over the last axis, ``sqrt((dx^2 + dy^2) + dz^2)``; the
+    nudge subtracts ``[1e-4, 1e-4, 0]``), so the same bits, without their dozen small arrays.
+    """
+    n_obs, n_steps = means.shape[0], means.shape[1]
+    nudged = False
+    for j in range(n_obs):
+        for i in range(n_steps):
+            k = j * n_steps + i
+            px, py, pz = p_bar[i, 0], p_bar[i, 1], p_bar[i, 2]
+            ox, oy, oz = means[j, i, 0], means[j, i, 1], means[j, i, 2]
+            dx, dy, dz = ox - px, oy - py, oz - pz
+            if math.sqrt(dx * dx + dy * dy + dz * dz) <= nudge_m:
+                px, py, pz = px - 1e-4, py - 1e-4, pz - 0.0
+                nudged = True
+            m1[0, k], m1[1, k], m1[2, k] = px, py, pz
+            m2[0, k], m2[1, k], m2[2, k] = ox, oy, oz
+    return nudged
 
 
 def hyperplane_rows(p_bar, drone_covs, means, covs, radius_sum, r_min, r_max, separator=None):
@@ -333,9 +366,16 @@ class Formulation:
         cached = self._separator
         if cached is not None and cached[0] is request and np.array_equal(cached[1], positions):
             return cached[2], cached[3]
-        close = _coincident(positions, request.obstacle_means)
-        nudged = bool(np.any(close))
-        res = request.covariance_pairs.minmax(_nudge(positions, request.obstacle_means, close), request.obstacle_means)
+        means, pairs = request.obstacle_means, request.covariance_pairs
+        if jit.available():
+            m1, m2 = np.empty((3, means.shape[0] * means.shape[1])), np.empty((3, means.shape[0] * means.shape[1]))
+            nudged = bool(_iterate_pairs()(np.ascontiguousarray(positions, dtype=float),
+                                           np.ascontiguousarray(means, dtype=float), _NUDGE_M, m1, m2))
+            res = pairs.minmax_components(m1, m2)
+        else:
+            close = _coincident(positions, means)
+            nudged = bool(np.any(close))
+            res = pairs.minmax(_nudge(positions, means, close), means)
         self._separator = (request, np.array(positions), nudged, res)
         return nudged, res
 
