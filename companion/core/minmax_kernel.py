@@ -173,6 +173,45 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton,
     return stalled
 
 
+def _shared_pairs_signature(t):
+    """One batch (N, 3, 3) and P batches (P, N, 3, 3) in, (3, 3, P N) components out."""
+    w3 = t.float64[:, :, ::1]
+    return t.void(jit.readonly(t, 3), jit.readonly(t, 4), w3, w3)
+
+
+@jit.lazy(_shared_pairs_signature)
+def _shared_pairs3(c1, c2, s1, s2):
+    """The planner's pairs laid out for the kernel: ``c1`` (N, 3, 3) against each row of ``c2``
+    (P, N, 3, 3), symmetrised, as components (3, 3, P N), pair ``j N + i``.
+
+    What ``overlap.CovariancePairs.shared_first`` did with numpy (component layout,
+    ``0.5 (upper + lower)`` for each off-diagonal pair, the diagonal as it is, ``c1`` tiled
+    ``P`` times), the same operations, so the same bits.
+    """
+    n_obs, n_steps = c2.shape[0], c2.shape[1]
+    for j in range(n_obs):
+        for i in range(n_steps):
+            k = j * n_steps + i
+            for r in range(3):
+                s1[r, r, k] = c1[i, r, r]
+                s2[r, r, k] = c2[j, i, r, r]
+                for c in range(r + 1, 3):
+                    m = 0.5 * (c1[i, r, c] + c1[i, c, r])
+                    s1[r, c, k] = m
+                    s1[c, r, k] = m
+                    m = 0.5 * (c2[j, i, r, c] + c2[j, i, c, r])
+                    s2[r, c, k] = m
+                    s2[c, r, k] = m
+
+
+def shared_pairs3(c1: np.ndarray, c2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_shared_pairs3` on validated covariances (square metres): ``(s1, s2)``, each (3, 3, P N)."""
+    n = c2.shape[0] * c2.shape[1]
+    s1, s2 = np.empty((3, 3, n)), np.empty((3, 3, n))
+    _shared_pairs3()(np.ascontiguousarray(c1, dtype=float), np.ascontiguousarray(c2, dtype=float), s1, s2)
+    return s1, s2
+
+
 def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
             u_tol: float, max_newton: int) -> tuple[dict[str, np.ndarray], int]:
     """The separator fields of ``n`` validated 3-D pairs, and how many pairs did not converge.

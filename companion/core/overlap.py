@@ -245,6 +245,9 @@ class CovariancePairs:
         """
         c1, c2 = np.asarray(cov1, dtype=float), np.asarray(cov2, dtype=float)
         P, d = c2.shape[0], c1.shape[-1]
+        if d == 3 and jit.available():    # one compiled pass, the same bits (minmax_kernel.shared_pairs3)
+            s1, s2 = minmax_kernel.shared_pairs3(c1, c2)
+            return cls(lead=c2.shape[:-2], s1=s1, s2=s2)
         s1 = _symmetrised_components("cov1", K.matrices_to_components(c1), check=False)
         s2 = _symmetrised_components("cov2", K.matrices_to_components(c2), check=False)
         return cls(lead=c2.shape[:-2], s1=np.tile(s1, (1, 1, P)), s2=s2)

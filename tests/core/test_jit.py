@@ -127,6 +127,30 @@ def test_that_the_compiled_iterate_pairs_give_the_numpy_nudge_and_layout_bits(se
     assert m1.tobytes() == reference.tobytes() and m2.tobytes() == K.vectors_to_components(means).tobytes()
 
 
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1))
+def test_that_the_compiled_pair_layout_gives_the_numpy_bits(seed):
+    """A request's covariance pairs (drone against each obstacle, symmetrised, batch-last):
+    the same bytes from the compiled pass and from numpy's layout, symmetrisation and tile."""
+    _require_compiled()
+    rng = np.random.default_rng(seed)
+    n_obs, n_steps = int(rng.integers(0, 5)), int(rng.integers(1, 41))
+    c1 = _random_covariances(rng, n_steps, 2.0)
+    c2 = _random_covariances(rng, max(n_obs, 1) * n_steps, 3.0)[: n_obs * n_steps].reshape(n_obs, n_steps, 3, 3)
+    c1 += 1e-12 * rng.standard_normal(c1.shape)       # the last bits asymmetric, as products leave them
+    c2 = c2 + 1e-12 * rng.standard_normal(c2.shape)
+    compiled = overlap.CovariancePairs.shared_first(c1, c2)
+    jit.available.cache_clear()
+    try:
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setitem(sys.modules, "numba", None)
+            reference = overlap.CovariancePairs.shared_first(c1, c2)
+    finally:
+        jit.available.cache_clear()
+    assert compiled.lead == reference.lead == (n_obs, n_steps)
+    assert compiled.s1.tobytes() == reference.s1.tobytes() and compiled.s2.tobytes() == reference.s2.tobytes()
+
+
 def test_that_warm_up_loads_every_registered_kernel():
     jit.warm_up()
     for compiled in jit._REGISTERED:
