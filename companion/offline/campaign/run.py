@@ -211,10 +211,9 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
                 for task in todo:
                     finished(run_episode(task))
             else:
-                local = isinstance(executor, ProcessPoolExecutor)
-                futures: dict[Future, EpisodeTask] = {
-                    (executor.submit(interruptible, run_episode, task) if local else executor.submit(run_episode, task)): task
-                    for task in todo}
+                # local pool workers take Ctrl-C only inside a run (_take_interrupts_only_in_runs)
+                call = (interruptible, run_episode) if isinstance(executor, ProcessPoolExecutor) else (run_episode,)
+                futures: dict[Future, EpisodeTask] = {executor.submit(*call, task): task for task in todo}
 
                 def take(fut: Future) -> None:
                     nonlocal lost
