@@ -262,7 +262,7 @@ class CovariancePairs:
         d = self.dim
         m1 = np.broadcast_to(np.asarray(mu1, dtype=float), self.lead + (d,))
         m2 = np.broadcast_to(np.asarray(mu2, dtype=float), self.lead + (d,))
-        return _minmax(K.vectors_to_components(m1), K.vectors_to_components(m2), self.s1, self.s2, self.lead)
+        return self.minmax_components(K.vectors_to_components(m1), K.vectors_to_components(m2))
 
     def minmax_components(self, m1: Array, m2: Array) -> MinmaxResult:
         """:meth:`minmax` with the means already laid out as (d, n) components, pair ``k`` of the flattened lead."""

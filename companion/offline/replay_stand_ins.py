@@ -77,12 +77,13 @@ class RecordedArrivals:
     (NAMED_VALUE_FLOAT :data:`~companion.loop.app.PLAN_ARRIVED`, the replan's number). The
     replay sets :attr:`arrivals` from the recorded tick before each tick; a job is solved
     when its arrival comes, so the replayed planner solves the same jobs in the same order
-    as the recorded one (its warm starts match) and its plan is applied at the same tick. Jobs the recording never solved (superseded, in logs
-    from before requests waited for a free planner) are dropped; a job the recorded planner
-    raised on (NAMED_VALUE_FLOAT :data:`~companion.loop.app.PLAN_LOST`, set in :attr:`lost`)
-    is handed back without a plan at its recorded tick. The service is :attr:`busy` from a
-    request until its recorded arrival or loss, as the recorded planning process was, so
-    the replayed loop builds its requests at the recorded ticks.
+    as the recorded one (its warm starts match) and its plan is applied at the same tick.
+    Jobs the recording never solved (superseded, in logs from before requests waited for a
+    free planner) are dropped; a job the recorded planner raised on (NAMED_VALUE_FLOAT
+    :data:`~companion.loop.app.PLAN_LOST`, set in :attr:`lost`) is handed back without a plan
+    at its recorded tick. The service is :attr:`busy` from a request until its recorded
+    arrival or loss, as the recorded planning process was, so the replayed loop builds its
+    requests at the recorded ticks.
     """
 
     asynchronous = True  #: announces its arrivals as the recorded planning service did

@@ -368,7 +368,8 @@ class Formulation:
             return cached[2], cached[3]
         means, pairs = request.obstacle_means, request.covariance_pairs
         if jit.available():
-            m1, m2 = np.empty((3, means.shape[0] * means.shape[1])), np.empty((3, means.shape[0] * means.shape[1]))
+            pairs_n = means.shape[0] * means.shape[1]
+            m1, m2 = np.empty((3, pairs_n)), np.empty((3, pairs_n))
             nudged = bool(_iterate_pairs()(np.ascontiguousarray(positions, dtype=float),
                                            np.ascontiguousarray(means, dtype=float), _NUDGE_M, m1, m2))
             res = pairs.minmax_components(m1, m2)
