@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import sys
 
@@ -34,14 +35,23 @@ def _random_covariances(rng: np.random.Generator, n: int, decades: float) -> np.
     return np.einsum("nij,nj,nkj->nik", q, 10.0 ** rng.uniform(-decades, decades, (n, 3)), q)
 
 
+@contextlib.contextmanager
+def _numba_unimportable():
+    """Inside, ``import numba`` fails: the code runs as on a machine without a working numba."""
+    jit.available.cache_clear()
+    try:
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setitem(sys.modules, "numba", None)    # "import numba" now raises ImportError
+            yield
+    finally:
+        jit.available.cache_clear()
+
+
 @pytest.fixture
-def numpy_only(monkeypatch):
-    """From when it is requested, ``import numba`` fails: the code runs as on a machine without a working numba."""
-    jit.available.cache_clear()
-    monkeypatch.setitem(sys.modules, "numba", None)    # "import numba" now raises ImportError
-    yield
-    monkeypatch.undo()
-    jit.available.cache_clear()
+def numpy_only():
+    """From when it is requested, ``import numba`` fails (:func:`_numba_unimportable`)."""
+    with _numba_unimportable():
+        yield
     assert jit.available()
 
 
@@ -140,13 +150,8 @@ def test_that_the_compiled_pair_layout_gives_the_numpy_bits(seed):
     c1 += 1e-12 * rng.standard_normal(c1.shape)       # the last bits asymmetric, as products leave them
     c2 = c2 + 1e-12 * rng.standard_normal(c2.shape)
     compiled = overlap.CovariancePairs.shared_first(c1, c2)
-    jit.available.cache_clear()
-    try:
-        with pytest.MonkeyPatch.context() as mp:
-            mp.setitem(sys.modules, "numba", None)
-            reference = overlap.CovariancePairs.shared_first(c1, c2)
-    finally:
-        jit.available.cache_clear()
+    with _numba_unimportable():      # a hypothesis test cannot take the numpy_only fixture per example
+        reference = overlap.CovariancePairs.shared_first(c1, c2)
     assert compiled.lead == reference.lead == (n_obs, n_steps)
     assert compiled.s1.tobytes() == reference.s1.tobytes() and compiled.s2.tobytes() == reference.s2.tobytes()
 
