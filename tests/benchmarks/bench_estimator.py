@@ -25,17 +25,30 @@ CYCLES = 400
 REPORT_DT_S = 0.1
 
 
-def _cycle_times() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+REPORT_COV = 0.02 * np.eye(3)
+WARM_UP = 20  # cycles not timed
+
+
+def _reports():
+    """The cycles' reports, seeded: first the tracks' starting positions (TRACKS, 3), then per
+    cycle ``(cycle, t, z)`` with ``z`` the (TRACKS, 3) reported positions (m, NED, s)."""
     rng = np.random.default_rng(0)
-    tr = ObstacleTracker(TrackerConfig())
-    keys = [(101 + i, 1) for i in range(TRACKS)]
     start = rng.uniform(-20, 20, (TRACKS, 3))
     vel = rng.uniform(-1, 1, (TRACKS, 3))
-    R = 0.02 * np.eye(3)
-    cycle, update_only, predict_only = [], [], []
-    for c in range(CYCLES + 20):
+    yield start
+    for c in range(CYCLES + WARM_UP):
         t = c * REPORT_DT_S
-        z = start + vel * t + 0.14 * rng.standard_normal((TRACKS, 3))
+        yield c, t, start + vel * t + 0.14 * rng.standard_normal((TRACKS, 3))
+
+
+def _cycle_times() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    tr = ObstacleTracker(TrackerConfig())
+    keys = [(101 + i, 1) for i in range(TRACKS)]
+    R = REPORT_COV
+    cycle, update_only, predict_only = [], [], []
+    reports = _reports()
+    next(reports)
+    for c, t, z in reports:
         horizon = t + STEP_S * np.arange(1, HORIZON + 1)
         t0 = time.perf_counter()
         for i, key in enumerate(keys):
@@ -43,7 +56,7 @@ def _cycle_times() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         t1 = time.perf_counter()
         tr.predict_many(keys, horizon)   # as the companion's request builder predicts its tracks
         t2 = time.perf_counter()
-        if c >= 20:  # warm-up
+        if c >= WARM_UP:
             cycle.append(t2 - t0)
             update_only.append((t1 - t0) / TRACKS)
             predict_only.append((t2 - t1) / TRACKS)
@@ -81,23 +94,22 @@ def _filterpy_update_s() -> float:
 
     from estimator.measurement import H_POSITION
 
-    rng = np.random.default_rng(0)
-    start = rng.uniform(-20, 20, (TRACKS, 3))
-    vel = rng.uniform(-1, 1, (TRACKS, 3))
+    reports = _reports()
+    start = next(reports)
+    q = TrackerConfig().accel_noise_psd_m2ps3
     filters = []
     for i in range(TRACKS):
         kf = KalmanFilter(dim_x=6, dim_z=3)
         kf.x, kf.P = np.concatenate([start[i], np.zeros(3)]), np.eye(6)
-        kf.F, kf.Q, kf.R = transition_matrix(REPORT_DT_S), process_noise(REPORT_DT_S, 0.01), 0.02 * np.eye(3)
+        kf.F, kf.Q, kf.R = transition_matrix(REPORT_DT_S), process_noise(REPORT_DT_S, q), REPORT_COV
         filters.append(kf)
     times = []
-    for c in range(CYCLES + 20):
-        z = start + vel * c * REPORT_DT_S + 0.14 * rng.standard_normal((TRACKS, 3))
+    for c, _, z in reports:
         t0 = time.perf_counter()
         for i, kf in enumerate(filters):
             kf.predict()
             kf.update(z[i], H=H_POSITION)
-        if c >= 20:
+        if c >= WARM_UP:
             times.append((time.perf_counter() - t0) / TRACKS)
     return float(np.median(times))
 
