@@ -230,8 +230,13 @@ class CovariancePairs:
                 raise InputError(f"leading dimensions do not broadcast: {exc}") from None
         out = []
         for name, arr in (("cov1", c1), ("cov2", c2)):
-            comp = _symmetrised_components(name, K.matrices_to_components(np.broadcast_to(arr, lead + (d, d))))
-            _require_pd(K.is_positive_definite(comp).reshape(lead), name)
+            full = np.broadcast_to(arr, lead + (d, d))
+            # 3-D: one compiled pass checks, symmetrises and lays out (the same tests, the same bits);
+            # a matrix it rejects sends the batch through numpy, which words the error
+            comp = minmax_kernel.checked_pairs3(full.reshape(-1, 3, 3)) if d == 3 and jit.available() else None
+            if comp is None:
+                comp = _symmetrised_components(name, K.matrices_to_components(full))
+                _require_pd(K.is_positive_definite(comp).reshape(lead), name)
             out.append(comp)
         return cls(lead=tuple(lead), s1=out[0], s2=out[1])
 

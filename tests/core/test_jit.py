@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 import companion.core.small_matrix as K
 from companion.core import jit, overlap
 from companion.core.planner import Planner, formulations, scp
+from companion.errors import InputError
 from tests.core.test_planner_scp import scenario_one
 
 
@@ -154,6 +155,48 @@ def test_that_the_compiled_pair_layout_gives_the_numpy_bits(seed):
         reference = overlap.CovariancePairs.shared_first(c1, c2)
     assert compiled.lead == reference.lead == (n_obs, n_steps)
     assert compiled.s1.tobytes() == reference.s1.tobytes() and compiled.s2.tobytes() == reference.s2.tobytes()
+
+
+def _checks_outcome(c1, c2):
+    """``CovariancePairs.from_arrays(c1, c2)``: its components' bytes, or the error it raised."""
+    try:
+        pairs = overlap.CovariancePairs.from_arrays(c1, c2)
+    except InputError as exc:
+        return str(exc)
+    return pairs.lead, pairs.s1.tobytes(), pairs.s2.tobytes()
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1))
+def test_that_the_compiled_covariance_checks_give_the_numpy_bits_and_errors(seed):
+    """Checked pairs (finite, symmetric to 1e-9, positive definite, symmetrised): the same bytes,
+    or the same error naming the same covariance and index, from the compiled pass and from numpy;
+    asymmetry and minors are drawn on both sides of the tests' edges."""
+    _require_compiled()
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 30))
+    c1, c2 = _random_covariances(rng, n, 2.0), _random_covariances(rng, n, 3.0)
+    c1 += 1e-12 * rng.standard_normal(c1.shape)       # the last bits asymmetric
+    for _ in range(int(rng.integers(0, 3))):          # now and then a matrix that fails, or just passes
+        c, k, r, q = (c1, c2)[rng.integers(2)], rng.integers(n), *rng.choice(3, 2, replace=False)
+        kind = rng.integers(4)
+        if kind == 0:
+            c[k, r, q] = (np.nan, np.inf, -np.inf)[rng.integers(3)]
+        elif kind == 1:      # asymmetry at about the tolerance, 1e-9 of the largest entry
+            c[k, r, q] += rng.choice([0.5, 0.999, 1.001, 2.0]) * 1e-9 * np.max(np.abs(c[k]))
+        elif kind == 2:      # eigenvalues through zero: semidefinite, indefinite (det > 0 with two), just definite
+            w, v = np.linalg.eigh(0.5 * (c[k] + c[k].T))
+            w *= rng.permutation([(1.0, 1.0, 0.0), (1.0, 1.0, -1.0), (-1.0, -1.0, 1.0), (1.0, 1.0, 1e-14)][rng.integers(4)])
+            c[k] = (v * w) @ v.T
+        else:                # a leading minor negative
+            c[k, 0, 0] = -abs(c[k, 0, 0]) if rng.random() < 0.5 else c[k, 0, 0]
+            c[k, 1, 1] = c[k, 0, 1] ** 2 / max(abs(c[k, 0, 0]), 1e-300) * rng.choice([0.5, 1.0, 2.0])
+    broadcast = rng.random() < 0.25                   # one covariance against the batch
+    a = c1[0] if broadcast else c1
+    compiled = _checks_outcome(a, c2)
+    with _numba_unimportable():
+        reference = _checks_outcome(a, c2)
+    assert compiled == reference
 
 
 def test_that_warm_up_loads_every_registered_kernel():
