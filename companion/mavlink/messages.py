@@ -28,6 +28,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink import px4
 from companion.errors import InputError
+from estimator.covariance import positive_definite_3x3
 
 logger = logging.getLogger(__name__)
 
@@ -311,9 +312,7 @@ def covariance_from_upper_triangle(values, *, what: str) -> np.ndarray | None | 
     if max(diag) > MAX_REPORTED_VARIANCE:
         return f"{what} has variances above {MAX_REPORTED_VARIANCE:g}: {diag}"
     cov = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
-    try:
-        np.linalg.cholesky(cov)
-    except np.linalg.LinAlgError:
+    if not positive_definite_3x3(xx, xy, xz, yy, yz, zz):     # Cholesky's pivots on floats, not LAPACK's call
         return f"{what} x/y/z block is not positive definite: {cov.tolist()}"
     return cov
 
