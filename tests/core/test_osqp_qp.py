@@ -1,0 +1,56 @@
+"""The planner's OSQP adapter: per-QP calls straight to osqp's extension give the wrapper's bits."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from companion.core.planner import Planner, osqp_qp
+from tests.core.test_planner_scp import _unavoidable_request, scenario_one
+
+
+def _fly(cfg, requests) -> list:
+    """A cold plan of each request, then two warm-started replans of it, on one planner."""
+    planner, plans = Planner(cfg), []
+    for req in requests:
+        warm = None
+        for _ in range(3):
+            warm = planner.solve(req, warm_start=warm)
+            plans.append(warm)
+    return plans
+
+
+def test_that_the_installed_osqp_takes_the_direct_calls():
+    """An osqp upgrade that moves its extension's solver fails here, instead of replanning slower unnoticed."""
+    cfg, req = scenario_one()
+    seen = []
+    real = osqp_qp._extension_solver
+
+    def spy(wrapper):
+        seen.append(real(wrapper))
+        return seen[-1]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(osqp_qp, "_extension_solver", spy)
+        Planner(cfg).solve(req)
+    assert seen and all(ext is not None for ext in seen)
+
+
+@pytest.mark.parametrize("formulation", ["hyperplane", "paper"])
+def test_that_plans_are_the_same_bits_through_the_extension_and_through_osqps_wrapper(formulation):
+    """Hard QPs, warm starts, rho restored after adaptation, and the least-violation QPs (new ``P``,
+    then the cost back) of an obstacle that cannot be avoided: every plan field the same bytes."""
+    cfg, req = scenario_one(formulation)
+    cfg = dataclasses.replace(cfg, replan_work_budget=10**6)
+    requests = [req, _unavoidable_request()]
+    direct = _fly(cfg, requests)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(osqp_qp, "_extension_solver", lambda wrapper: None)
+        wrapped = _fly(cfg, requests)
+    assert any(p.status == "slack" for p in direct)          # the least-violation QPs ran
+    for a, b in zip(direct, wrapped, strict=True):
+        assert (a.status, a.iterations, a.admm_iterations, a.notes) == (b.status, b.iterations, b.admm_iterations, b.notes)
+        for field in ("velocities", "positions", "commands", "eta", "contour_of_touch", "slack_max"):
+            assert np.asarray(getattr(a, field)).tobytes() == np.asarray(getattr(b, field)).tobytes(), field
