@@ -212,54 +212,6 @@ def shared_pairs3(c1: np.ndarray, c2: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return s1, s2
 
 
-def _checked_pairs_signature(t):
-    """A batch (n, 3, 3) in, its (3, 3, n) components out; returns an int."""
-    return t.int64(jit.readonly(t, 3), t.float64[:, :, ::1])
-
-
-@jit.lazy(_checked_pairs_signature)
-def _checked_pairs3(c, s):
-    """Check and lay out ``n`` covariances ``c`` (n, 3, 3) as symmetrised components ``s`` (3, 3, n).
-
-    The checks of ``overlap.CovariancePairs.from_arrays``, with its arithmetic: every entry
-    finite; each off-diagonal pair within ``1e-9`` of the largest entry's magnitude (plus
-    ``1e-300``) of each other; then ``0.5 (upper + lower)`` written to both, the diagonal
-    as it is; positive definite by Sylvester's criterion on the symmetrised matrix, with
-    ``small_matrix.det``'s formula. Returns -1 when every matrix passes, else the index of
-    the first that does not (the caller's numpy path then words the error).
-    """
-    for k in range(c.shape[0]):
-        largest = 0.0
-        for r in range(3):
-            for q in range(3):
-                v = c[k, r, q]
-                if not math.isfinite(v):
-                    return k
-                largest = max(largest, abs(v))
-        bound = 1e-9 * largest + 1e-300
-        for r in range(3):
-            s[r, r, k] = c[k, r, r]
-            for q in range(r + 1, 3):
-                upper, lower = c[k, r, q], c[k, q, r]
-                if abs(upper - lower) > bound:
-                    return k
-                m = 0.5 * (upper + lower)
-                s[r, q, k] = m
-                s[q, r, k] = m
-        a, b, cc, d, e, f = s[0, 0, k], s[0, 1, k], s[0, 2, k], s[1, 1, k], s[1, 2, k], s[2, 2, k]
-        det = a * (d * f - e * e) + b * (cc * e - b * f) + cc * (b * e - cc * d)
-        if not (a > 0.0 and a * d - b * b > 0.0 and det > 0.0):
-            return k
-    return -1
-
-
-def checked_pairs3(c: np.ndarray) -> np.ndarray | None:
-    """:func:`_checked_pairs3` on a float64 batch ``c`` (n, 3, 3), square metres: its (3, 3, n)
-    symmetrised components, or None when a matrix is not finite, symmetric and positive definite."""
-    s = np.empty((3, 3, c.shape[0]))
-    return s if _checked_pairs3()(np.ascontiguousarray(c, dtype=float), s) < 0 else None
-
-
 def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
             u_tol: float, max_newton: int) -> tuple[dict[str, np.ndarray], int]:
     """The separator fields of ``n`` validated 3-D pairs, and how many pairs did not converge.

@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
-from companion.core import jit, minmax_kernel
+from companion.core import covariance_checks, jit, minmax_kernel
 from companion.core import small_matrix as K
 from companion.errors import InputError
 
@@ -144,7 +144,7 @@ def _checked(name: str, value: ArrayLike, extra: int) -> Array:
     arr = np.asarray(value, dtype=float)
     if arr.ndim < extra:
         raise InputError(f"{name} must have at least {extra} dimension(s), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise InputError(f"{name} contains NaN or infinite values")
     return arr
 
@@ -233,7 +233,7 @@ class CovariancePairs:
             full = np.broadcast_to(arr, lead + (d, d))
             # 3-D: one compiled pass checks, symmetrises and lays out (the same tests, the same bits);
             # a matrix it rejects sends the batch through numpy, which words the error
-            comp = minmax_kernel.checked_pairs3(full.reshape(-1, 3, 3)) if d == 3 and jit.available() else None
+            comp = covariance_checks.checked_pairs3(full.reshape(-1, 3, 3)) if d == 3 and jit.available() else None
             if comp is None:
                 comp = _symmetrised_components(name, K.matrices_to_components(full))
                 _require_pd(K.is_positive_definite(comp).reshape(lead), name)

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 import companion.core.small_matrix as K
 from companion.core import jit, overlap
-from companion.core.planner import Planner, formulations, scp
+from companion.core.planner import Planner, PlanRequest, formulations, scp
 from companion.errors import InputError
 from tests.core.test_planner_scp import scenario_one
 
@@ -157,13 +157,41 @@ def test_that_the_compiled_pair_layout_gives_the_numpy_bits(seed):
     assert compiled.s1.tobytes() == reference.s1.tobytes() and compiled.s2.tobytes() == reference.s2.tobytes()
 
 
-def _checks_outcome(c1, c2):
-    """``CovariancePairs.from_arrays(c1, c2)``: its components' bytes, or the error it raised."""
+def _spoil(rng: np.random.Generator, batches: list[np.ndarray], tolerance: float) -> None:
+    """Now and then (0 to 2 times) spoil a matrix of one of ``batches`` (each (n, 3, 3), in place), or
+    nearly: a NaN or infinite entry, asymmetry at about ``tolerance`` of the largest entry, eigenvalues
+    through zero (semidefinite, indefinite with a positive determinant, just definite), a leading minor
+    at or below zero."""
+    for _ in range(int(rng.integers(0, 3))):
+        c = batches[rng.integers(len(batches))]
+        k, (r, q) = rng.integers(len(c)), rng.choice(3, 2, replace=False)
+        kind = rng.integers(4)
+        if kind == 0:
+            c[k, r, q] = (np.nan, np.inf, -np.inf)[rng.integers(3)]
+        elif kind == 1:
+            c[k, r, q] += rng.choice([0.5, 0.999, 1.001, 2.0]) * tolerance * np.max(np.abs(c[k]))
+        elif kind == 2:
+            w, v = np.linalg.eigh(0.5 * (c[k] + c[k].T))
+            w *= rng.permutation([(1.0, 1.0, 0.0), (1.0, 1.0, -1.0), (-1.0, -1.0, 1.0), (1.0, 1.0, 1e-14)][rng.integers(4)])
+            c[k] = (v * w) @ v.T
+        else:
+            c[k, 0, 0] = -abs(c[k, 0, 0]) if rng.random() < 0.5 else c[k, 0, 0]
+            c[k, 1, 1] = c[k, 0, 1] ** 2 / max(abs(c[k, 0, 0]), 1e-300) * rng.choice([0.5, 1.0, 2.0])
+
+
+def _outcome(build):
+    """``build()``'s result, or the text of the InputError it raised."""
     try:
-        pairs = overlap.CovariancePairs.from_arrays(c1, c2)
+        return build()
     except InputError as exc:
         return str(exc)
-    return pairs.lead, pairs.s1.tobytes(), pairs.s2.tobytes()
+
+
+def _compiled_and_numpy(build):
+    """``_outcome(build)`` with the compiled passes, then as without numba."""
+    compiled = _outcome(build)
+    with _numba_unimportable():      # a hypothesis test cannot take the numpy_only fixture per example
+        return compiled, _outcome(build)
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
@@ -177,25 +205,37 @@ def test_that_the_compiled_covariance_checks_give_the_numpy_bits_and_errors(seed
     n = int(rng.integers(1, 30))
     c1, c2 = _random_covariances(rng, n, 2.0), _random_covariances(rng, n, 3.0)
     c1 += 1e-12 * rng.standard_normal(c1.shape)       # the last bits asymmetric
-    for _ in range(int(rng.integers(0, 3))):          # now and then a matrix that fails, or just passes
-        c, k, r, q = (c1, c2)[rng.integers(2)], rng.integers(n), *rng.choice(3, 2, replace=False)
-        kind = rng.integers(4)
-        if kind == 0:
-            c[k, r, q] = (np.nan, np.inf, -np.inf)[rng.integers(3)]
-        elif kind == 1:      # asymmetry at about the tolerance, 1e-9 of the largest entry
-            c[k, r, q] += rng.choice([0.5, 0.999, 1.001, 2.0]) * 1e-9 * np.max(np.abs(c[k]))
-        elif kind == 2:      # eigenvalues through zero: semidefinite, indefinite (det > 0 with two), just definite
-            w, v = np.linalg.eigh(0.5 * (c[k] + c[k].T))
-            w *= rng.permutation([(1.0, 1.0, 0.0), (1.0, 1.0, -1.0), (-1.0, -1.0, 1.0), (1.0, 1.0, 1e-14)][rng.integers(4)])
-            c[k] = (v * w) @ v.T
-        else:                # a leading minor negative
-            c[k, 0, 0] = -abs(c[k, 0, 0]) if rng.random() < 0.5 else c[k, 0, 0]
-            c[k, 1, 1] = c[k, 0, 1] ** 2 / max(abs(c[k, 0, 0]), 1e-300) * rng.choice([0.5, 1.0, 2.0])
-    broadcast = rng.random() < 0.25                   # one covariance against the batch
-    a = c1[0] if broadcast else c1
-    compiled = _checks_outcome(a, c2)
-    with _numba_unimportable():
-        reference = _checks_outcome(a, c2)
+    _spoil(rng, [c1, c2], 1e-9)
+    a = c1[0] if rng.random() < 0.25 else c1          # now and then one covariance against the batch
+
+    def pairs():
+        p = overlap.CovariancePairs.from_arrays(a, c2)
+        return p.lead, p.s1.tobytes(), p.s2.tobytes()
+
+    compiled, reference = _compiled_and_numpy(pairs)
+    assert compiled == reference
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1))
+def test_that_a_plan_request_checks_its_covariances_compiled_as_with_numpy(seed):
+    """A request's drone, obstacle and margin covariances: accepted with the same arrays, or
+    refused with the same error naming the same field and index, compiled and with numpy."""
+    _require_compiled()
+    rng = np.random.default_rng(seed)
+    n, p = int(rng.integers(1, 20)), int(rng.integers(0, 4))
+    drone, obstacles = _random_covariances(rng, n, 1.0), _random_covariances(rng, max(p, 1) * n, 2.0)
+    margin = _random_covariances(rng, 1, 1.0)
+    _spoil(rng, [drone, obstacles, margin], 1e-9)
+    obstacles, means = obstacles[: p * n].reshape(p, n, 3, 3), rng.standard_normal((p, n, 3))
+
+    def request():
+        r = PlanRequest(position=np.zeros(3), velocity=np.zeros(3), drone_covs=drone, target=np.ones(3),
+                        obstacle_means=means, obstacle_covs=obstacles, obstacle_radii=np.full(p, 0.5),
+                        margin_cov=margin[0])
+        return r.drone_covs.tobytes(), r.obstacle_covs.tobytes(), r.safety_covs.tobytes()
+
+    compiled, reference = _compiled_and_numpy(request)
     assert compiled == reference
 
 

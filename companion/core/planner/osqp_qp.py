@@ -174,7 +174,7 @@ class OsqpQp:
         return QpSolution(
             x=np.array(x, dtype=float), y=np.array(y, dtype=float),
             objective=math.nan if status == osqp.SolverStatus.OSQP_NON_CVX else float(info.obj_val),
-            status=str(info.status), usable=status in _ACCEPTABLE and np.all(np.isfinite(x)),
+            status=str(info.status), usable=status in _ACCEPTABLE and bool(np.isfinite(x).all()),
             accurate=status in _SOLVED, iterations=int(info.iter), solve_time_s=float(info.solve_time),
             update_time_s=float(info.update_time),
         )

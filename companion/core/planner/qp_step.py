@@ -247,7 +247,7 @@ def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: 
     qp.update(p_data=data.p_data, q=data.q)
     if least is None or budget.exhausted:
         return None
-    if np.all(np.isfinite(least.x)):     # an unconverged (1) still bounds the slack it needs
+    if np.isfinite(least.x).all():     # an unconverged (1) still bounds the slack it needs
         needed = np.maximum(least.x[layout.slack_cols[layout.safety_slacks]], 0.0)
         cap = np.where(needed > SLACK_TOL, needed + LEAST_VIOLATION_MARGIN, 0.0)   # unneeded: pinned
         u[safety] = cap / layout.slack_scale
