@@ -152,28 +152,19 @@ def _problem_3x3(c: list[list[float]], rtol: float) -> str | None:
     scale = max(max(abs(x) for x in values), _TINY)
     if max(abs(b - d), abs(c_ - g), abs(f - h)) > rtol * scale:
         return "covariance is not symmetric"
-    if not positive_definite_3x3(a, d, g, e, h, i):     # LAPACK reads the lower triangle
+    # Cholesky of the lower triangle (LAPACK reads one triangle): pivots l11^2, l22^2, l33^2
+    if not a > 0.0:
+        return "covariance is not positive definite"
+    l11 = math.sqrt(a)
+    l21, l31 = d / l11, g / l11
+    p2 = e - l21 * l21
+    if not p2 > 0.0:
+        return "covariance is not positive definite"
+    l22 = math.sqrt(p2)
+    l32 = (h - l31 * l21) / l22
+    if not i - l31 * l31 - l32 * l32 > 0.0:
         return "covariance is not positive definite"
     return None
-
-
-def positive_definite_3x3(xx: float, yx: float, zx: float, yy: float, zy: float, zz: float) -> bool:
-    """Whether the symmetric 3x3 matrix with this diagonal and lower triangle passes Cholesky.
-
-    The pivots ``l11^2``, ``l22^2``, ``l33^2`` of the factorisation in closed form on Python
-    floats, each of which must be positive (NaN fails): 0.4 us a call against 9 to 10 us for
-    ``numpy.linalg.cholesky`` (``timeit``). LAPACK groups the last pivot's sums differently,
-    so the two can disagree only on matrices within rounding of singular.
-    """
-    if not xx > 0.0:
-        return False
-    l11 = math.sqrt(xx)
-    l21, l31 = yx / l11, zx / l11
-    p2 = yy - l21 * l21
-    if not p2 > 0.0:
-        return False
-    l32 = (zy - l31 * l21) / math.sqrt(p2)
-    return zz - l31 * l31 - l32 * l32 > 0.0
 
 
 def symmetrise(cov: np.ndarray) -> np.ndarray:
