@@ -101,6 +101,9 @@ def test_that_nan_in_covariance_element_zero_means_unknown():
         ({"pose_cov": upper_triangle(np.diag([1, 1, 1, 1, 1, 1]) + np.diag([2.0, 0, 0, 0, 0], 1))},
          "not positive definite"),
         ({"vel_cov": diag_ut(0.1, 0.0, 0.1)}, "velocity_covariance x/y/z block is not positive definite"),
+        # eigenvalues 5, -1, -1: the determinant is positive, the leading 2x2 minor is not
+        ({"pose_cov": upper_triangle(np.block([[np.full((3, 3), 2.0) - np.eye(3), np.zeros((3, 3))],
+                                               [np.zeros((3, 3)), np.eye(3)]]))}, "not positive definite"),
         ({"pose_cov": diag_ut(1e30, 1e30, 1e30)}, "variances above 10000"),   # finite, absurd (issue 14)
         ({"pose_cov": diag_ut(0.1, 0.1, 1.0001e4)}, "variances above 10000"),
         ({"vel_cov": diag_ut(1e30, 0.1, 0.1)}, "velocity_covariance has variances above"),
