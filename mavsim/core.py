@@ -141,6 +141,11 @@ class Simulator:
         """Simulated seconds since boot."""
         return self.now_us * 1e-6
 
+    @property
+    def goal_reached_t_s(self) -> float | None:
+        """Simulation time (s) at which the true position first came within the goal tolerance, or None."""
+        return self.recorder.goal_reached_t_s
+
     def _estimate(self) -> tuple[np.ndarray, np.ndarray]:
         """Noisy (position, velocity) estimate, sampled once per time instant."""
         if self._est_t != self.now_us:

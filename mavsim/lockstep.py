@@ -112,6 +112,12 @@ class LockstepSimulator:
         return self._sim.summary()
 
     @property
+    def goal_reached_t_s(self) -> float | None:
+        """When the truth first reached the goal, simulation seconds, or None (the summary's
+        ``time_to_goal_s``, without building the summary)."""
+        return self._sim.goal_reached_t_s
+
+    @property
     def truth(self) -> Truth:
         """True state of the drone and obstacles now."""
         return self._sim.truth

@@ -155,7 +155,7 @@ def run_lockstep(
                     continue
                 sim.write(packet)
             if stop_after_goal_s is not None:
-                if goal_t is None and sim.summary().get("goal_reached"):
+                if goal_t is None and sim.goal_reached_t_s is not None:   # not summary(): every tick
                     goal_t = sim.time_s
                 if goal_t is not None and sim.time_s - goal_t >= stop_after_goal_s:
                     break

@@ -277,6 +277,7 @@ def test_that_truth_reports_collisions_and_goal():
     assert s["collided"] and s["collisions"][0]["with"] == "o1"
     assert s["min_distance_m"]["o1"] == pytest.approx(0.0, abs=0.01)
     assert s["goal_reached"] and s["time_to_goal_s"] == 0.0
+    assert c.sim.goal_reached_t_s == s["time_to_goal_s"]     # the harness's per-tick query, without the summary
     import json
     json.dumps(s)
 
