@@ -115,29 +115,21 @@ class OsqpQp:
     def update(self, *, p_data: np.ndarray | None = None, q: np.ndarray | None = None,
                a_data: np.ndarray | None = None, l: np.ndarray | None = None, u: np.ndarray | None = None) -> None:
         """Update data in place (same pattern); ``None`` leaves a piece unchanged."""
-        kwargs = {}
-        if q is not None:
-            kwargs["q"] = q
-        if l is not None:
-            kwargs["l"] = l
-        if u is not None:
-            kwargs["u"] = u
         if p_data is not None:
-            kwargs["Px"] = p_data
             np.take(p_data, self._p_full_source, out=self.p_full.data)
-        if a_data is not None:
-            kwargs["Ax"] = a_data
-        if not kwargs:
-            return
+        vectors = q is not None or l is not None or u is not None
+        matrices = p_data is not None or a_data is not None
         ext = self._direct
         if ext is None:
-            self._solver.update(**kwargs)
+            given = {"q": q, "l": l, "u": u, "Px": p_data, "Ax": a_data}
+            if vectors or matrices:
+                self._solver.update(**{k: v for k, v in given.items() if v is not None})
             return
         # what osqp.OSQP.update passes on: l and u clipped to OSQP's infinity, vectors before matrices
-        if q is not None or l is not None or u is not None:
+        if vectors:
             ext.update_data_vec(q=q, l=None if l is None else np.maximum(l, -self._infinity),
                                 u=None if u is None else np.minimum(u, self._infinity))
-        if p_data is not None or a_data is not None:
+        if matrices:
             ext.update_data_mat(P_x=p_data, P_i=None, A_x=a_data, A_i=None)
 
     @staticmethod
