@@ -15,8 +15,6 @@ Without numba (:func:`companion.core.jit.available` false) the callers run numpy
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from companion.core import jit
@@ -31,8 +29,9 @@ def _checked_pairs_signature(t):
 def _checked_pairs3(c, s):
     """Check and lay out ``n`` covariances ``c`` (n, 3, 3) as symmetrised components ``s`` (3, 3, n).
 
-    The checks of ``overlap.CovariancePairs.from_arrays``, with its arithmetic: every entry
-    finite; each off-diagonal pair within ``1e-9`` of the largest entry's magnitude (plus
+    The checks of ``overlap.CovariancePairs.from_arrays`` on finite covariances (it checks
+    finiteness before), with its arithmetic: each off-diagonal pair within ``1e-9`` of the
+    largest entry's magnitude (plus
     ``1e-300``) of each other; then ``0.5 (upper + lower)`` written to both, the diagonal
     as it is; positive definite by Sylvester's criterion on the symmetrised matrix, with
     ``small_matrix.det``'s formula. Returns -1 when every matrix passes, else the index of
@@ -42,10 +41,7 @@ def _checked_pairs3(c, s):
         largest = 0.0
         for r in range(3):
             for q in range(3):
-                v = c[k, r, q]
-                if not math.isfinite(v):
-                    return k
-                largest = max(largest, abs(v))
+                largest = max(largest, abs(c[k, r, q]))
         bound = 1e-9 * largest + 1e-300
         for r in range(3):
             s[r, r, k] = c[k, r, r]
@@ -64,8 +60,8 @@ def _checked_pairs3(c, s):
 
 
 def checked_pairs3(c: np.ndarray) -> np.ndarray | None:
-    """:func:`_checked_pairs3` on a float64 batch ``c`` (n, 3, 3), square metres: its (3, 3, n)
-    symmetrised components, or None when a matrix is not finite, symmetric and positive definite."""
+    """:func:`_checked_pairs3` on a finite float64 batch ``c`` (n, 3, 3), square metres: its (3, 3, n)
+    symmetrised components, or None when a matrix is not symmetric and positive definite."""
     s = np.empty((3, 3, c.shape[0]))
     return s if _checked_pairs3()(np.ascontiguousarray(c, dtype=float), s) < 0 else None
 
