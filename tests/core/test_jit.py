@@ -150,11 +150,14 @@ def test_that_the_compiled_pair_layout_gives_the_numpy_bits(seed):
     c2 = _random_covariances(rng, max(n_obs, 1) * n_steps, 3.0)[: n_obs * n_steps].reshape(n_obs, n_steps, 3, 3)
     c1 += 1e-12 * rng.standard_normal(c1.shape)       # the last bits asymmetric, as products leave them
     c2 = c2 + 1e-12 * rng.standard_normal(c2.shape)
-    compiled = overlap.CovariancePairs.shared_first(c1, c2)
-    with _numba_unimportable():      # a hypothesis test cannot take the numpy_only fixture per example
-        reference = overlap.CovariancePairs.shared_first(c1, c2)
-    assert compiled.lead == reference.lead == (n_obs, n_steps)
-    assert compiled.s1.tobytes() == reference.s1.tobytes() and compiled.s2.tobytes() == reference.s2.tobytes()
+
+    def layout():
+        p = overlap.CovariancePairs.shared_first(c1, c2)
+        return p.lead, p.s1.tobytes(), p.s2.tobytes()
+
+    compiled, reference = _compiled_and_numpy(layout)
+    assert compiled[0] == (n_obs, n_steps)
+    assert compiled == reference
 
 
 def _spoil(rng: np.random.Generator, batches: list[np.ndarray], tolerance: float) -> None:
