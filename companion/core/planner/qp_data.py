@@ -18,6 +18,77 @@ from companion.core.planner.qp_layout import QpLayout
 from companion.core.planner.request import PlanRequest
 
 
+class RequestTemplate:
+    """What :meth:`RequestData.build` writes that depends on the configuration and the QP shape only.
+
+    Built once per planner and shape (the planner's workspace holds it), so that a request
+    pays only for its own parts. :meth:`RequestData.build` fills those in with the
+    operations that built the whole vectors before, so every value is the same to the bit.
+
+    Attributes
+    ----------
+    config, layout : the planner's configuration and the QP pattern.
+    v0_low, v0_high : (3,) the clip of ``V_0`` (``v_max + a_max tau`` each way), m/s.
+    weight_progress : the progress weight per step, ``w_p / N``.
+    jerk_scale : ``2 w_j / tau^4``, the jerk term's factor in ``P`` and ``q``.
+    q, q_hard : (n,) the linear cost with the slack penalties (``q_hard``: the safety
+        slacks unpenalised) and zero on ``V`` and ``p``.
+    l, u : (m,) the bounds with the request's rows (``dyn``, walls' upper side) zero and
+        the first acceleration and command rows without ``V_0``.
+    """
+
+    def __init__(self, config: PlannerConfig, layout: QpLayout) -> None:
+        cfg = config
+        N, tau = layout.N, cfg.step_s
+        vmax, amax = cfg.velocity_max, cfg.accel_max
+        self.config, self.layout = cfg, layout
+        self.v0_low, self.v0_high = -vmax - amax * tau, vmax + amax * tau
+        self.weight_progress = cfg.weight_progress / N
+        self.jerk_scale = 2.0 * cfg.weight_jerk / tau**4
+        self._p_data = layout.p_data(self.jerk_scale, 2.0 * cfg.weight_velocity, np.zeros((3, 3)))
+        # where the upper triangles of the N position blocks land in P's CSC data
+        rank = np.empty_like(layout.p_perm)
+        rank[layout.p_perm] = np.arange(layout.p_perm.size)
+        self._p_blocks = rank[layout.p_n_vel:].reshape(N, layout.p_term_idx[0].size)
+        # D2' c with c = (V_0, 0, ..., 0) touches only D2's first column
+        self._jerk_column = layout.d2_t[:, [0]].toarray()
+        q = np.zeros(layout.n)
+        for name in ("s_lo", "e_pos", "e_neg", "s_wall"):
+            q[layout.col[name].slice] = cfg.slack_penalty * layout.slack_scale   # variable = slack / slack_scale
+        q[layout.col["s_hi"].slice] = cfg.c_max_penalty * layout.slack_scale
+        q_hard = q.copy()                               # q: soft, slacks penalised
+        q_hard[layout.slack_cols[layout.safety_slacks]] = 0.0   # hard: safety slacks pinned to 0
+        l, u = np.zeros(layout.m), np.zeros(layout.m)
+        acc = np.broadcast_to(amax * tau, (N, 3)).copy()
+        lo_acc, hi_acc = -acc, acc.copy()
+        if not layout.lag.bounds_command_steps:       # a response model: the autopilot limits acceleration
+            lo_acc[:], hi_acc[:] = -np.inf, np.inf
+        l[layout.row["accel"].slice], u[layout.row["accel"].slice] = lo_acc.ravel(), hi_acc.ravel()
+        if layout.row["cmd"].size:          # commands within the speed bound: (1 - a) |u_i| <= (1 - a) v_max
+            cmd = np.broadcast_to((1.0 - layout.lag.alpha) * vmax, (N, 3)).copy()
+            l[layout.row["cmd"].slice], u[layout.row["cmd"].slice] = -cmd.ravel(), cmd.ravel()
+        l[layout.row["wall"].slice] = -np.inf
+        l[layout.row["slack"].slice], u[layout.row["slack"].slice] = 0.0, np.inf
+        self.q, self.q_hard, self.l, self.u = q, q_hard, l, u
+        for value in (self.v0_low, self.v0_high, self._p_data, self._p_blocks, self._jerk_column, q, q_hard, l, u):
+            value.setflags(write=False)
+
+    def p_data(self, terminal: np.ndarray, stage: np.ndarray) -> np.ndarray:
+        """``P`` data (CSC order) with the Hessian blocks ``stage`` (3, 3) on every ``p_i`` and
+        ``stage + terminal`` on ``p_N``: :meth:`QpLayout.p_data` of this template's velocity block."""
+        tr, tc = self.layout.p_term_idx
+        blocks = np.empty(self._p_blocks.shape)
+        blocks[:] = stage[tr, tc]
+        blocks[-1] += terminal[tr, tc]
+        data = self._p_data.copy()
+        data[self._p_blocks] = blocks
+        return data
+
+    def jerk_q(self, v0: np.ndarray) -> np.ndarray:
+        """``D2' c`` (N, 3) for ``c = (V_0, 0, ..., 0)``, as scipy's sparse product sums it (from +0)."""
+        return 0.0 + self._jerk_column * v0
+
+
 @dataclass(frozen=True)
 class RequestData:
     """Per-request constants of the QP (cost, walls, kinematic bounds), computed once per solve.
@@ -60,68 +131,54 @@ class RequestData:
                 value.setflags(write=False)
 
     @classmethod
-    def build(cls, config: PlannerConfig, formulation: Formulation, layout: QpLayout, request: PlanRequest,
+    def build(cls, template: RequestTemplate, formulation: Formulation, request: PlanRequest,
               y_warm: np.ndarray | None = None) -> RequestData:
-        """Constants of ``request`` for ``layout`` (``y_warm``: shifted duals of the previous replan)."""
-        cfg = config
+        """Constants of ``request`` on ``template`` (its configuration and layout; ``y_warm``: shifted duals)."""
+        cfg, layout = template.config, template.layout
         N, tau = layout.N, cfg.step_s
-        vmax, amax = cfg.velocity_max, cfg.accel_max
         # V_0 clipped so that |V_1 - V_0| <= a tau and |V_1| <= v_max can hold together
-        v0 = np.clip(request.velocity, -vmax - amax * tau, vmax + amax * tau)
+        v0 = np.clip(request.velocity, template.v0_low, template.v0_high)
         # terminal: w_t (p_N - g)' M (p_N - g), M = S_N^-1  ->  P += 2 w_t M, q += -2 w_t M g
         m = np.linalg.inv(request.drone_covs[-1])
         m = 0.5 * (m + m.T)
-        wt, wj, wv = cfg.weight_terminal, cfg.weight_jerk, cfg.weight_velocity
-        jerk_scale = 2.0 * wj / tau**4
+        wt, wj, wp = cfg.weight_terminal, cfg.weight_jerk, template.weight_progress
         # progress: (w_p / N) sum_i (p_i - g)' M (p_i - g): without it the plan only has to be
         # at the target at step N, so each replan arrives "N steps from now" and the drone
         # closes in asymptotically
-        wp = cfg.weight_progress / N
-        p_data = layout.p_data(jerk_scale, 2.0 * wv, 2.0 * wt * m, 2.0 * wp * m)
-        # jerk: |D2 V + c|^2 / tau^4 per axis with c_0 = V_0  ->  q += 2 w_j/tau^4 D2' c
-        c = np.zeros((N - 1, 3))
-        c[0] = v0
-        q = np.zeros(layout.n)
-        q[layout.col["V"].slice] = (jerk_scale * (layout.d2_t @ c)).ravel()
-        pn = layout.col["p"].start + 3 * (N - 1)
-        q[layout.col["p"].slice] = np.tile(-2.0 * wp * (m @ request.target), N)
-        q[pn:pn + 3] += -2.0 * wt * (m @ request.target)
-        for name in ("s_lo", "e_pos", "e_neg", "s_wall"):
-            q[layout.col[name].slice] = cfg.slack_penalty * layout.slack_scale   # variable = slack / slack_scale
-        q[layout.col["s_hi"].slice] = cfg.c_max_penalty * layout.slack_scale
-        q_hard = q.copy()                               # q: soft, slacks penalised
-        q_hard[layout.slack_cols[layout.safety_slacks]] = 0.0   # hard: safety slacks pinned to 0
-        constant = (wt + wp * N) * request.target @ m @ request.target + wj / tau**4 * float(np.sum(c * c))
+        p_data = template.p_data(2.0 * wt * m, 2.0 * wp * m)
+        q, q_hard = template.q.copy(), template.q_hard.copy()
+        # jerk: |D2 V + c|^2 / tau^4 per axis with c_0 = V_0, the rest 0  ->  q += 2 w_j/tau^4 D2' c
+        q_v = template.jerk_scale * template.jerk_q(v0)
+        goal = m @ request.target
+        q_p = np.empty((N, 3))
+        q_p[:] = -2.0 * wp * goal
+        q_p[-1] += -2.0 * wt * goal
+        for vec in (q, q_hard):        # the two differ in the slack penalties only (in the template)
+            vec[layout.col["V"].slice] = q_v.ravel()
+            vec[layout.col["p"].slice] = q_p.ravel()
+        # |c|^2 = |V_0|^2, summed as numpy sums c * c
+        v0_sq = float(v0[0] * v0[0] + v0[1] * v0[1]) + float(v0[2] * v0[2])
+        constant = (wt + wp * N) * request.target @ m @ request.target + wj / tau**4 * v0_sq
         # A: constants plus wall normals (fixed for this request)
         a_slot = layout.a_data0.copy()
         if layout.W:
-            a_slot[layout.slot["wall_p"].slice] = np.broadcast_to(
-                request.walls_normal[:, None, :], (layout.W, N, 3)).ravel()
-        # bounds that do not depend on the iterate
-        l = np.zeros(layout.m)
-        u = np.zeros(layout.m)
+            a_slot[layout.slot["wall_p"].slice].reshape(layout.W, N, 3)[:] = request.walls_normal[:, None, :]
+        # bounds: the template's, with V_0, p_0 and the walls of this request
+        l, u = template.l.copy(), template.u.copy()
         dyn = layout.lag.free_increments(v0, N)           # p_1 - b V_1 = p_0 + c V_0 for the lag
         dyn[0] += request.position
         l[layout.row["dyn"].slice] = u[layout.row["dyn"].slice] = dyn.ravel()
-        acc = np.broadcast_to(amax * tau, (N, 3)).copy()
-        lo_acc, hi_acc = -acc, acc.copy()
-        lo_acc[0] += v0
-        hi_acc[0] += v0
-        if not layout.lag.bounds_command_steps:       # a response model: the autopilot limits acceleration
-            lo_acc[:], hi_acc[:] = -np.inf, np.inf
-        l[layout.row["accel"].slice], u[layout.row["accel"].slice] = lo_acc.ravel(), hi_acc.ravel()
+        if layout.lag.bounds_command_steps:       # else a response model: the autopilot limits acceleration
+            first = slice(layout.row["accel"].start, layout.row["accel"].start + 3)
+            l[first] += v0
+            u[first] += v0
         if layout.row["cmd"].size:          # commands within the speed bound: (1 - a) |u_i| <= (1 - a) v_max
-            alpha = layout.lag.alpha
-            cmd = np.broadcast_to((1.0 - alpha) * vmax, (N, 3)).copy()
-            lo_cmd, hi_cmd = -cmd, cmd.copy()
-            lo_cmd[0] += alpha * v0
-            hi_cmd[0] += alpha * v0
-            l[layout.row["cmd"].slice], u[layout.row["cmd"].slice] = lo_cmd.ravel(), hi_cmd.ravel()
+            first = slice(layout.row["cmd"].start, layout.row["cmd"].start + 3)
+            l[first] += layout.lag.alpha * v0
+            u[first] += layout.lag.alpha * v0
         # walls: a.p_i - s <= b - r sqrt(a' S_i a) - R_drone
         wall_upper = formulation.wall_upper(request)
-        l[layout.row["wall"].slice] = -np.inf
         u[layout.row["wall"].slice] = wall_upper.ravel()
-        l[layout.row["slack"].slice], u[layout.row["slack"].slice] = 0.0, np.inf
         # sensing range: distance from the drone now to each obstacle's first predicted mean
         if request.num_obstacles:
             dist = np.linalg.norm(request.obstacle_means[:, 0, :] - request.position, axis=-1)

@@ -18,8 +18,7 @@ from companion.core.planner.budget import WorkBudget
 from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import LAM_EPS, Formulation, ObstacleRows, relax_out_of_range
 from companion.core.planner.osqp_qp import MAX_ITER, OsqpQp, QpSolution
-from companion.core.planner.qp_data import RequestData
-from companion.core.planner.qp_layout import QpLayout
+from companion.core.planner.qp_data import RequestData, RequestTemplate
 
 logger = logging.getLogger(__name__)
 
@@ -82,14 +81,16 @@ class QpWorkspace:
     Attributes
     ----------
     layout : the fixed QP pattern.
+    template : the request-independent part of every request's constants (this shape and configuration).
     qp : the OSQP solver (set up at the first solve of this shape), or None.
     a_slot, l, u : ``A`` data in slot order and the bounds, rewritten per QP.
     x0 : the primal start of the QP (the linearisation point, slacks 0).
     last_y : duals of the last QP solved for this shape (the next replan's warm start).
     """
 
-    def __init__(self, layout: QpLayout) -> None:
-        self.layout = layout
+    def __init__(self, template: RequestTemplate) -> None:
+        layout = template.layout
+        self.layout, self.template = layout, template
         self.qp: OsqpQp | None = None
         self.a_slot = np.empty_like(layout.a_data0)
         self.l = np.empty(layout.m)

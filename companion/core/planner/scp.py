@@ -42,7 +42,7 @@ from companion.core.planner.budget import WorkBudget
 from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import Formulation, ObstacleRows, make_formulation, relax_out_of_range
 from companion.core.planner.osqp_qp import OsqpQp
-from companion.core.planner.qp_data import RequestData
+from companion.core.planner.qp_data import RequestData, RequestTemplate
 from companion.core.planner.qp_layout import QpLayout
 from companion.core.planner.qp_step import SLACK_TOL, QpStep, QpWorkspace, solve_qp
 from companion.core.planner.request import Plan, PlanRequest
@@ -145,7 +145,7 @@ class Planner:
         ws = self._workspace(request)
         layout = ws.layout
         y_warm = ws.last_y[layout.shift_rows] if warm_start is not None and ws.last_y is not None else None
-        data = RequestData.build(cfg, form, layout, request, y_warm)
+        data = RequestData.build(ws.template, form, request, y_warm)
         ws.start(data)
         v_bar = self.initial_velocities(request, data.v0, warm_start)
         p_bar = self.lag.positions(request.position, data.v0, v_bar)
@@ -199,7 +199,7 @@ class Planner:
         Exposed so that tests can compare one QP with an independent model of it.
         """
         ws = self._workspace(request)
-        data = RequestData.build(self.config, self.formulation, ws.layout, request)
+        data = RequestData.build(ws.template, self.formulation, request)
         ws.start(data)
         v_bar = np.asarray(velocities, dtype=float)
         p_bar = self.lag.positions(request.position, data.v0, v_bar)
@@ -262,7 +262,7 @@ class Planner:
         if key not in self._workspaces:
             layout = QpLayout(*key, paper=self.formulation.carries_lam, upper=self.formulation.has_upper,
                               step_s=self.config.step_s, lag=self.lag)
-            self._workspaces[key] = QpWorkspace(layout)
+            self._workspaces[key] = QpWorkspace(RequestTemplate(self.config, layout))
             logger.debug("planner: new QP shape N=%d P=%d W=%d (n=%d, m=%d)", *key, layout.n, layout.m)
         return self._workspaces[key]
 
