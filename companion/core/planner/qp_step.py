@@ -42,6 +42,8 @@ class QpStep:
     velocities, positions : (N, 3) solution.
     lam : (P, N) overlap parameters (``paper``; else the iterate's minmax ``lam``).
     slack_obstacle, slack_upper, slack_wall : (P, N), (P, N), (W, N) slacks at the solution.
+    safety_slack : the largest safety slack (in-range obstacle rows and walls, units of
+        the row; 0 without such rows).
     objective : cost at the solution including constants and slack penalties (slacks clipped at 0).
     cost : ``objective`` without the slack penalties (terminal + jerk + effort).
     rows : the linearised obstacle rows used.
@@ -61,6 +63,7 @@ class QpStep:
     slack_obstacle: np.ndarray
     slack_upper: np.ndarray
     slack_wall: np.ndarray
+    safety_slack: float
     objective: float
     cost: float
     rows: ObstacleRows
@@ -103,6 +106,11 @@ class QpWorkspace:
         np.copyto(self.a_slot, data.a_slot)
         np.copyto(self.l, data.l)
         np.copyto(self.u, data.u)
+
+
+def _largest(arrays: tuple[np.ndarray, ...]) -> float:
+    """The largest entry of the non-empty ``arrays`` (0.0 if all are empty)."""
+    return max((float(np.maximum.reduce(a, axis=None)) for a in arrays if a.size), default=0.0)
 
 
 def linearise(formulation: Formulation, data: RequestData, positions: np.ndarray,
@@ -205,10 +213,11 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     lam = x[col["lam"].slice].reshape(P, N) if layout.paper else np.zeros((P, N))
     sig = layout.slack_scale
     s_hi = sig * x[col["s_hi"].slice].reshape(P, N) if layout.upper else np.zeros((P, N))
+    s_lo, s_wall = sig * x[col["s_lo"].slice].reshape(P, N), sig * x[col["s_wall"].slice].reshape(layout.W, N)
     return QpStep(
         velocities=vel, positions=pos, lam=lam,
-        slack_obstacle=sig * x[col["s_lo"].slice].reshape(P, N), slack_upper=s_hi,
-        slack_wall=sig * x[col["s_wall"].slice].reshape(layout.W, N),
+        slack_obstacle=s_lo, slack_upper=s_hi, slack_wall=s_wall,
+        safety_slack=_largest((s_lo[data.in_range], s_wall)),
         objective=objective, cost=objective - penalty, rows=rows,
         velocity_lower=v_lo, velocity_upper=v_hi, lam_lower=lam_lo, lam_upper=lam_hi,
         wall_upper=data.wall_upper, v0=data.v0, solution=sol, admm_iterations=admm, least_violation=least,

@@ -181,7 +181,7 @@ class Planner:
             # the exact recheck decides, unless the iterate needs safety slack and needed the
             # same last time: then the violation is forced (e.g. by the current state) and
             # further iterations only repeat it (they ran to the cap, measured in the corridor)
-            slack = self._safety_slack(data, step)
+            slack = step.safety_slack
             if small and (form.recheck(request, step.positions, data.in_range)[1]
                           or (slack > SLACK_TOL and abs(slack - slack_prev) <= SLACK_TOL)):
                 converged = True
@@ -266,12 +266,6 @@ class Planner:
             logger.debug("planner: new QP shape N=%d P=%d W=%d (n=%d, m=%d)", *key, layout.n, layout.m)
         return self._workspaces[key]
 
-    @staticmethod
-    def _safety_slack(data: RequestData, step: QpStep) -> float:
-        """Largest safety slack of a QP step (in-range obstacle rows and walls), row units."""
-        slack = [step.slack_obstacle[data.in_range].ravel(), step.slack_wall.ravel()]
-        return float(max((float(s.max()) for s in slack if s.size), default=0.0))
-
     def _finish(self, request: PlanRequest, data: RequestData, step: QpStep | None, v_bar: np.ndarray,
                 v_start: np.ndarray, iterations: int, budget: WorkBudget, notes: list[str], t0: float) -> Plan:
         cfg = self.config
@@ -281,7 +275,7 @@ class Planner:
             slack_max, cost = np.inf, np.nan
         else:
             velocities, positions = step.velocities.copy(), step.positions.copy()
-            slack_max = self._safety_slack(data, step)
+            slack_max = step.safety_slack
             cost = step.objective
             upper = float(step.slack_upper[data.upper_active].max(initial=0.0))
             if upper > C_MAX_SLACK_TOL:

@@ -48,7 +48,10 @@ from companion.errors import ConfigError
 def _with_previous(v0: np.ndarray, velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``V_1..V_N`` (N, 3) as floats and ``V_0..V_{N-1}`` (N, 3) beside them."""
     velocities = np.asarray(velocities, dtype=float)
-    return velocities, np.vstack([np.asarray(v0, dtype=float)[None], velocities[:-1]])
+    previous = np.empty(velocities.shape)
+    previous[0] = v0
+    previous[1:] = velocities[:-1]
+    return velocities, previous
 
 
 @dataclass(frozen=True)
