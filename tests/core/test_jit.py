@@ -160,6 +160,57 @@ def test_that_the_compiled_pair_layout_gives_the_numpy_bits(seed):
     assert compiled == reference
 
 
+def _separator_fields(rng: np.random.Generator, n_obs: int, n_steps: int):
+    """A separator's normal (P, N, 3) in the kernel's strided layout, s1, s2 (P, N), with signed zeros."""
+    comp = rng.normal(size=(3, n_obs * n_steps)) * 10.0 ** rng.uniform(-3.0, 1.0)
+    comp[rng.random(comp.shape) < 0.1] = rng.choice([0.0, -0.0])
+    normal = comp.T.reshape(n_obs, n_steps, 3)           # what MinmaxResult holds: a strided view
+    s1, s2 = (rng.uniform(0.05, 2.0, n_obs * n_steps).reshape(n_obs, n_steps) for _ in range(2))
+    return normal, s1, s2
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1))
+def test_that_the_compiled_hyperplane_rows_and_exact_figures_give_the_numpy_bits(seed):
+    """The rows and the exact touch radius and distance per (obstacle, step): the same bytes
+    compiled and with numpy, for the separator's strided normal and a contiguous copy of it,
+    with signed zeros, zero radii and positions on the obstacle means."""
+    _require_compiled()
+    rng = np.random.default_rng(seed)
+    n_obs, n_steps = int(rng.integers(0, 5)), int(rng.integers(1, 41))
+    normal, s1, s2 = _separator_fields(rng, n_obs, n_steps)
+    if rng.random() < 0.3:
+        normal = np.ascontiguousarray(normal)
+    positions = rng.normal(0.0, 5.0, (n_steps, 3))
+    means = positions[None] + rng.normal(0.0, 3.0, (n_obs, n_steps, 3)) * (rng.random((n_obs, n_steps, 1)) < 0.8)
+    means[rng.random(means.shape) < 0.05] = -0.0
+    radii = rng.choice([0.0, 0.3, 0.5], n_obs)
+    drone = float(rng.choice([0.0, 0.4]))
+    upper = None if rng.random() < 0.5 else 3.5
+
+    def both():
+        rows = formulations.pair_kernels.hyperplane_rows(normal, s1, s2, means, radii + drone, 2.5, upper)
+        figs = formulations.pair_kernels.exact_figures(normal, s1, s2, means, positions, radii, drone)
+        return [a.tobytes() for a in rows + figs]
+
+    compiled, reference = _compiled_and_numpy(both)
+    assert compiled == reference
+
+
+def test_that_the_pair_kernels_sum_as_einsum_did_on_the_separators_layout():
+    """The planner's rows and figures were einsum's sums over the axes; on the separator's
+    strided normal (the only layout the planner passes) einsum sums in the axes' order from
+    +0, which is what dot3 and the kernels do, so the change from einsum moved no bit."""
+    rng = np.random.default_rng(11)
+    normal, s1, s2 = _separator_fields(rng, 3, 40)
+    means = rng.normal(0.0, 10.0, (3, 40, 3))
+    means[0, :5] = -0.0
+    got, want = formulations.pair_kernels.dot3(normal, means), np.einsum("pnk,pnk->pn", normal, means)
+    assert got.tobytes() == want.tobytes()
+    rows = formulations.pair_kernels.hyperplane_rows(normal, s1, s2, means, np.full(3, 0.9), 2.5, None)
+    assert rows[1].tobytes() == (2.5 * (s1 + s2) + 0.9 - want).tobytes()
+
+
 def _spoil(rng: np.random.Generator, batches: list[np.ndarray], tolerance: float) -> None:
     """Now and then (0 to 2 times) spoil a matrix of one of ``batches`` (each (n, 3, 3), in place), or
     nearly: a NaN or infinite entry, asymmetry at about ``tolerance`` of the largest entry, eigenvalues

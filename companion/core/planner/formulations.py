@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.core import jit, overlap
+from companion.core.planner import pair_kernels
 from companion.core.planner.request import PlanRequest
 from companion.core.planner.safety import RECHECK_TOL_M, RECHECK_TOL_SIGMA, SafetyFigures, exact_safety
 
@@ -157,11 +158,10 @@ def hyperplane_rows(p_bar, drone_covs, means, covs, radius_sum, r_min, r_max, se
     if separator is None:
         separator = overlap.minmax(_nudge(p_bar, means), np.broadcast_to(drone_covs[None], covs.shape), means, covs)
     res = separator
-    n, ssum = res.normal, res.s1 + res.s2
-    n_o = np.einsum("pnk,pnk->pn", n, means)
-    lower = (r_min + BACKOFF_SIGMA) * ssum + radius_sum[:, None] - n_o   # -n.p >= r_min(s1+s2) + R - n.o
-    upper = r_max * ssum + radius_sum[:, None] - n_o if r_max is not None else np.full_like(lower, np.inf)
-    return ObstacleRows(coef_p=-n, lower=lower, upper=upper), res
+    # -n.p >= r_min (s1 + s2) + R - n.o, and <= r_max (s1 + s2) + R - n.o with c_max
+    coef_p, lower, upper = pair_kernels.hyperplane_rows(res.normal, res.s1, res.s2, means, radius_sum,
+                                                        r_min + BACKOFF_SIGMA, r_max)
+    return ObstacleRows(coef_p=coef_p, lower=lower, upper=upper), res
 
 
 def deterministic_rows(p_bar, means, radius_sum):

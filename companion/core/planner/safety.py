@@ -16,6 +16,7 @@ from functools import cached_property
 import numpy as np
 
 from companion.core import overlap
+from companion.core.planner import pair_kernels
 from companion.core.planner.request import PlanRequest
 
 logger = logging.getLogger(__name__)
@@ -73,14 +74,14 @@ def exact_safety(request: PlanRequest, positions: np.ndarray, drone_radius_m: fl
         The minmax of ``positions`` against the obstacles if already computed (P, N).
     """
     P, N = request.num_obstacles, request.horizon_steps
-    radius_sum = request.obstacle_radii[:, None] + drone_radius_m
     if P:
-        mu1 = np.broadcast_to(positions[None], (P, N, 3))
-        res = separator if separator is not None else request.covariance_pairs.minmax(mu1, request.obstacle_means)
-        delta = request.obstacle_means - mu1
-        eta = (np.einsum("pnk,pnk->pn", res.normal, delta) - radius_sum) / (res.s1 + res.s2)
+        if separator is None:
+            separator = request.covariance_pairs.minmax(np.broadcast_to(positions[None], (P, N, 3)),
+                                                        request.obstacle_means)
+        res = separator
+        eta, distance = pair_kernels.exact_figures(res.normal, res.s1, res.s2, request.obstacle_means, positions,
+                                                   request.obstacle_radii, drone_radius_m)
         lam = res.lam
-        distance = np.linalg.norm(delta, axis=-1) - radius_sum
     else:
         eta = lam = distance = np.zeros((0, N))
     # a.p_i + r sqrt(a' S_i a) + R_drone <= b
