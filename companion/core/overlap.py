@@ -107,7 +107,7 @@ def confidence_from_radius(radius: ArrayLike, dim: int) -> Array | float:
     """
     d = _check_dim(dim)
     r = np.asarray(radius, dtype=float)
-    if np.any(np.isnan(r)):
+    if np.isnan(r).any():
         raise InputError("radius must not be NaN")
     c = special.gammainc(d / 2.0, 0.5 * np.square(np.maximum(r, 0.0)))
     return float(c) if c.ndim == 0 else c

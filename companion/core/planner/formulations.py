@@ -256,7 +256,8 @@ def _inverse_row_norm(coef_p: np.ndarray, coef_lam: np.ndarray) -> np.ndarray:
 
 def relax_out_of_range(rows: ObstacleRows, in_range: np.ndarray) -> ObstacleRows:
     """Rows with obstacles outside sensing range made inactive (zero coefficients, infinite bounds)."""
-    if np.all(in_range):
+    in_range = np.asarray(in_range, dtype=bool)
+    if in_range.all():
         return rows
     off = ~in_range
     def zero(a):
@@ -351,7 +352,7 @@ class Formulation:
 
     def _holds(self, request: PlanRequest, positions: np.ndarray, figs: SafetyFigures, in_range: np.ndarray) -> bool:
         """Whether this formulation's own constraints hold on ``positions`` (their exact figures ``figs``)."""
-        return self._walls_hold(figs) and bool(np.all(figs.eta[in_range] >= self.r_min - RECHECK_TOL_SIGMA))
+        return self._walls_hold(figs) and bool((figs.eta[in_range] >= self.r_min - RECHECK_TOL_SIGMA).all())
 
     def separator(self, request: PlanRequest, positions: np.ndarray) -> overlap.MinmaxResult:
         """Minmax of the drone at ``positions`` (N, 3) against every obstacle (P, N), nudged off coincident means."""
@@ -389,7 +390,7 @@ class Formulation:
 
     @staticmethod
     def _walls_hold(figs: SafetyFigures) -> bool:
-        return bool(np.all(figs.wall_margin >= -RECHECK_TOL_M))
+        return bool((figs.wall_margin >= -RECHECK_TOL_M).all())
 
     def _radius_sum(self, request: PlanRequest) -> np.ndarray:
         return request.obstacle_radii + self.drone_radius_m

@@ -29,6 +29,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from companion.core import jit
 from companion.core.planner.qp_layout import QpLayout
 
 logger = logging.getLogger(__name__)
@@ -103,6 +104,7 @@ class OsqpQp:
         self.p_full = self._symmetric(layout.p_matrix(markers))
         self._p_full_source = self.p_full.data.astype(np.intp) - 1
         self.p_full.data[:] = p_data[self._p_full_source]
+        self._p_indptr, self._p_indices = self.p_full.indptr.astype(np.intp), self.p_full.indices.astype(np.intp)
         self._solver = osqp.OSQP()
         self._solver.setup(
             layout.p_matrix(p_data), q, layout.a_matrix_csc(a_data), l, u,
@@ -111,6 +113,14 @@ class OsqpQp:
         )
         self._direct = _extension_solver(self._solver)
         self._infinity = float(self._solver.constant("OSQP_INFTY"))
+
+    def p_times(self, x: np.ndarray) -> np.ndarray:
+        """``P x`` with the full symmetric ``P`` (the objective's ``x'Px``), summed as scipy's CSR product sums it."""
+        if not jit.available():
+            return self.p_full @ x
+        out = np.empty(self.p_full.shape[0])
+        _csr_product()(self._p_indptr, self._p_indices, self.p_full.data, np.ascontiguousarray(x, dtype=float), out)
+        return out
 
     def update(self, *, p_data: np.ndarray | None = None, q: np.ndarray | None = None,
                a_data: np.ndarray | None = None, l: np.ndarray | None = None, u: np.ndarray | None = None) -> None:
@@ -170,6 +180,23 @@ class OsqpQp:
             accurate=status in _SOLVED, iterations=int(info.iter), solve_time_s=float(info.solve_time),
             update_time_s=float(info.update_time),
         )
+
+
+def _csr_product_signature(t):
+    """CSR index arrays (intp), data and a vector in, the product out."""
+    index = t.Array(t.intp, 1, "C", readonly=True)
+    return t.void(index, index, jit.readonly(t, 1), jit.readonly(t, 1), t.float64[::1])
+
+
+@jit.lazy(_csr_product_signature)
+def _csr_product(indptr, indices, data, x, out):
+    """``out = A x`` for a CSR ``A``: each row summed from +0 over its entries in stored order,
+    as scipy's ``csr_matvec`` does (so the same bits), without scipy's Python dispatch."""
+    for i in range(out.shape[0]):
+        acc = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            acc += data[k] * x[indices[k]]
+        out[i] = acc
 
 
 #: What :class:`OsqpQp` calls on the extension's solver (osqp 1.x's ``OSQPSolver``).

@@ -205,7 +205,7 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     # tolerance, and a slightly negative slack times the large penalty would bias J
     xc = x.copy()
     xc[layout.slack_cols] = np.maximum(xc[layout.slack_cols], 0.0)
-    objective = 0.5 * float(xc @ (qp.p_full @ xc)) + float(data.q @ xc) + data.constant
+    objective = 0.5 * float(xc @ qp.p_times(xc)) + float(data.q @ xc) + data.constant
     penalty = float(data.q[layout.slack_cols] @ xc[layout.slack_cols])
     col = layout.col
     vel = x[col["V"].slice].reshape(N, 3)
