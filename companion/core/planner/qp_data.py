@@ -29,6 +29,7 @@ class RequestTemplate:
     ----------
     config, layout : the planner's configuration and the QP pattern.
     v0_low, v0_high : (3,) the clip of ``V_0`` (``v_max + a_max tau`` each way), m/s.
+    velocity_low, velocity_high : (3,) the speed bound ``-v_max``, ``v_max``, m/s.
     weight_progress : the progress weight per step, ``w_p / N``.
     jerk_scale : ``2 w_j / tau^4``, the jerk term's factor in ``P`` and ``q``.
     q, q_hard : (n,) the linear cost with the slack penalties (``q_hard``: the safety
@@ -43,6 +44,7 @@ class RequestTemplate:
         vmax, amax = cfg.velocity_max, cfg.accel_max
         self.config, self.layout = cfg, layout
         self.v0_low, self.v0_high = -vmax - amax * tau, vmax + amax * tau
+        self.velocity_low, self.velocity_high = -vmax, vmax
         self.weight_progress = cfg.weight_progress / N
         self.jerk_scale = 2.0 * cfg.weight_jerk / tau**4
         self._p_data = layout.p_data(self.jerk_scale, 2.0 * cfg.weight_velocity, np.zeros((3, 3)))
@@ -70,7 +72,7 @@ class RequestTemplate:
         l[layout.row["wall"].slice] = -np.inf
         l[layout.row["slack"].slice], u[layout.row["slack"].slice] = 0.0, np.inf
         self.q, self.q_hard, self.l, self.u = q, q_hard, l, u
-        for value in (self.v0_low, self.v0_high, self._p_data, self._p_blocks, self._jerk_column, q, q_hard, l, u):
+        for value in (self.v0_low, self.v0_high, self.velocity_low, self.velocity_high, self._p_data, self._p_blocks, self._jerk_column, q, q_hard, l, u):
             value.setflags(write=False)
 
     def p_data(self, terminal: np.ndarray, stage: np.ndarray) -> np.ndarray:

@@ -108,6 +108,17 @@ class QpWorkspace:
         np.copyto(self.u, data.u)
 
 
+def _primal_start(ws: QpWorkspace, v_bar: np.ndarray, p_bar: np.ndarray, lam_bar: np.ndarray | None) -> np.ndarray:
+    """``ws.x0`` set to the linearisation point, slacks 0: a QP's primal start."""
+    layout, x0 = ws.layout, ws.x0
+    x0[:] = 0.0
+    x0[layout.col["V"].slice] = v_bar.ravel()
+    x0[layout.col["p"].slice] = p_bar.ravel()
+    if layout.paper:
+        x0[layout.col["lam"].slice] = lam_bar.ravel()
+    return x0
+
+
 def _largest(arrays: tuple[np.ndarray, ...]) -> float:
     """The largest entry of the non-empty ``arrays`` (0.0 if all are empty)."""
     return max((float(np.maximum.reduce(a, axis=None)) for a in arrays if a.size), default=0.0)
@@ -142,8 +153,8 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
         upper = np.where(data.upper_active[:, None], rows.upper, np.inf)  # c_max released where masked
         l[layout.row["obs_hi"].slice], u[layout.row["obs_hi"].slice] = -np.inf, upper.ravel()
     # velocity box ∩ trust region around the iterate
-    vmax, tr = cfg.velocity_max, cfg.trust_region_mps
-    v_lo, v_hi = np.maximum(-vmax, v_bar - tr), np.minimum(vmax, v_bar + tr)
+    tr, template = cfg.trust_region_mps, ws.template
+    v_lo, v_hi = np.maximum(template.velocity_low, v_bar - tr), np.minimum(template.velocity_high, v_bar + tr)
     l[layout.row["vbox"].slice], u[layout.row["vbox"].slice] = v_lo.ravel(), v_hi.ravel()
     lam_lo = lam_hi = np.zeros((P, 0))
     if layout.paper:
@@ -175,17 +186,11 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
                             eps_rel=cfg.solver_eps_rel, polish=cfg.solver_polish, rho=cfg.solver_rho)
     else:
         qp.update(p_data=data.p_data if first else None, q=data.q_hard, a_data=a_data, l=l, u=u)
-    # primal start at the linearisation point (slacks 0)
-    x0 = ws.x0
-    x0[:] = 0.0
-    x0[layout.col["V"].slice] = v_bar.ravel()
-    x0[layout.col["p"].slice] = p_bar.ravel()
-    if layout.paper:
-        x0[layout.col["lam"].slice] = lam_bar.ravel()
     if first:
         # duals of the previous replan shifted by one step like the primal; a cold start
         # starts them at zero, so that its plan does not depend on what was solved before
-        qp.warm_start(x=x0, y=data.y_warm if data.y_warm is not None else np.zeros(layout.m))
+        qp.warm_start(x=_primal_start(ws, v_bar, p_bar, lam_bar),
+                      y=data.y_warm if data.y_warm is not None else np.zeros(layout.m))
     admm_before = budget.admm_iterations
     sol = None
     if try_hard:
@@ -195,7 +200,7 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     least = sol is None or not sol.accurate
     if least:
         hard_status = "skipped" if sol is None else sol.status
-        sol = least_violation(cfg, ws, data, x0, budget)
+        sol = least_violation(cfg, ws, data, _primal_start(ws, v_bar, p_bar, lam_bar), budget)
         if sol is None:
             return None
         logger.debug("hard QP %s; soft QP %s", hard_status, sol.status)
