@@ -129,7 +129,7 @@ class SourceClock:
         """(offset at ``t_rx``, drift) of the current epoch, or None before any stamp."""
         if not self._bins:
             return None
-        if self._fit is None:  # the bins changed since the last fit (each map() reads it twice)
+        if self._fit is None:  # the bins changed since the last fit
             self._fit = self._fit_envelope()
         lower, drift, t_mean = self._fit
         if math.isnan(t_mean):
@@ -198,12 +198,16 @@ class SourceClock:
         return True
 
     def _add(self, t_rx: float, offset: float) -> None:
-        self._fit = None
+        # the fit is a function of the bins: it is dropped only when they change (a new
+        # minimum, a new bin, an old bin out of the window), not at every report
         if self._bins and t_rx - self._bins[-1][0] < self.bin_s:
             b = self._bins[-1]
             if offset < b[2]:
                 b[1], b[2] = t_rx, offset
+                self._fit = None
         else:
             self._bins.append([t_rx, t_rx, offset])
+            self._fit = None
         while self._bins and t_rx - self._bins[0][0] > self.window_s:
             self._bins.popleft()
+            self._fit = None

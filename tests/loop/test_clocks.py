@@ -74,3 +74,29 @@ def test_that_bad_settings_and_non_finite_times_raise():
         SourceClock(window_s=0.0)
     with pytest.raises(ValueError):
         SourceClock().map(float("nan"), 1.0)
+
+
+def test_that_the_envelope_is_refitted_only_when_its_bins_change_and_maps_as_a_fresh_fit():
+    """The fit is a function of the bins: kept while a report changes none of them, it must map
+    every stamp exactly as a fit made afresh at that report would (a clock kept up to date at
+    every report is the reference)."""
+    kept, fresh = SourceClock(), SourceClock()
+    fits = []
+    real = SourceClock._fit_envelope
+
+    def counting(self):
+        if self is kept:
+            fits.append(1)
+        return real(self)
+
+    rng = np.random.default_rng(3)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(SourceClock, "_fit_envelope", counting)
+        for i in range(600):
+            t = 10.0 + 0.05 * i
+            stamp_us = round((7.0 + 1.001 * t) * 1e6)
+            t_rx = t + rng.uniform(0.002, 0.030)
+            fresh._fit = None                            # the reference refits at every report
+            a, b = kept.map(stamp_us, t_rx, 1e-6), fresh.map(stamp_us, t_rx, 1e-6)
+            assert (a.t_s, a.offset_s, a.drift, a.clamped) == (b.t_s, b.offset_s, b.drift, b.clamped)
+    assert 0 < len(fits) < 400                           # most reports leave the bins as they were
