@@ -118,6 +118,12 @@ def _nudge(p_bar: np.ndarray, means: np.ndarray, close: np.ndarray | None = None
     return out
 
 
+def _same_values(kept: np.ndarray, positions: np.ndarray) -> bool:
+    """``np.array_equal(kept, positions)`` for float arrays (the same test, without its Python layer)."""
+    positions = np.asarray(positions)
+    return kept.shape == positions.shape and bool((kept == positions).all())
+
+
 def _iterate_pairs_signature(t):
     """Iterate (N, 3) and obstacle means (P, N, 3) in, the pairs' means as (3, P N) components out."""
     w2 = t.float64[:, ::1]
@@ -342,7 +348,7 @@ class Formulation:
         returns is that iterate, so the final recheck asks the same question.
         """
         cached = self._recheck
-        if (cached is not None and cached[0] is request and np.array_equal(cached[1], positions)
+        if (cached is not None and cached[0] is request and _same_values(cached[1], positions)
                 and np.array_equal(cached[2], in_range)):
             return cached[3]
         figs = self._exact(request, positions)
@@ -365,7 +371,7 @@ class Formulation:
         linearisation around it ask for the same one.
         """
         cached = self._separator
-        if cached is not None and cached[0] is request and np.array_equal(cached[1], positions):
+        if cached is not None and cached[0] is request and _same_values(cached[1], positions):
             return cached[2], cached[3]
         means, pairs = request.obstacle_means, request.covariance_pairs
         if jit.available():
