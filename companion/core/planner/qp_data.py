@@ -72,7 +72,8 @@ class RequestTemplate:
         l[layout.row["wall"].slice] = -np.inf
         l[layout.row["slack"].slice], u[layout.row["slack"].slice] = 0.0, np.inf
         self.q, self.q_hard, self.l, self.u = q, q_hard, l, u
-        for value in (self.v0_low, self.v0_high, self.velocity_low, self.velocity_high, self._p_data, self._p_blocks, self._jerk_column, q, q_hard, l, u):
+        for value in (self.v0_low, self.v0_high, self.velocity_low, self.velocity_high, self._p_data,
+                      self._p_blocks, self._jerk_column, q, q_hard, l, u):
             value.setflags(write=False)
 
     def p_data(self, terminal: np.ndarray, stage: np.ndarray) -> np.ndarray:
