@@ -23,6 +23,7 @@ CONFIGS = {
     "response": dict(vehicle_response=PX4_LIKE),
     "paper, c_max": dict(formulation="paper", c_max=0.99),
     "no progress weight": dict(weight_progress=0.0, c_max=0.99),
+    "progress weight": dict(weight_progress=2.0, velocity_time_constant_s=0.3),   # P's stage blocks nonzero
 }
 #: current velocities: signed zeros, one clipped axis, small and mixed values
 VELOCITIES = ([0.0, -0.0, 0.0], [-0.0, 0.7, -0.0], [9.0, -2.5, 0.3], [1e-12, -3e-7, 0.2], [-1.3, 1.7, -0.4])
@@ -72,7 +73,13 @@ def whole_vectors(cfg: PlannerConfig, form, layout, request: PlanRequest) -> dic
     l[layout.row["wall"].slice] = -np.inf
     u[layout.row["wall"].slice] = form.wall_upper(request).ravel()
     l[layout.row["slack"].slice], u[layout.row["slack"].slice] = 0.0, np.inf
-    return dict(v0=v0, p_data=layout.p_data(jerk_scale, 2.0 * wv, 2.0 * wt * m, 2.0 * wp * m), q=q, q_hard=q_hard,
+    # P: the velocity block and the N position blocks concatenated, then permuted into CSC order
+    blocks = np.broadcast_to(2.0 * wp * m, (N_, 3, 3)).copy()
+    blocks[-1] += 2.0 * wt * m
+    tr, tc = layout.p_term_idx
+    vel = jerk_scale * layout.p_vel_jerk + 2.0 * wv * layout.p_vel_diag
+    p_data = np.concatenate([vel, blocks[:, tr, tc].ravel()])[layout.p_perm]
+    return dict(v0=v0, p_data=p_data, q=q, q_hard=q_hard,
                 a_slot=a_slot, l=l, u=u,
                 constant=(wt + wp * N_) * request.target @ m @ request.target + wj / tau**4 * float(np.sum(c * c)))
 

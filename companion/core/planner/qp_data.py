@@ -48,10 +48,6 @@ class RequestTemplate:
         self.weight_progress = cfg.weight_progress / N
         self.jerk_scale = 2.0 * cfg.weight_jerk / tau**4
         self._p_data = layout.p_data(self.jerk_scale, 2.0 * cfg.weight_velocity, np.zeros((3, 3)))
-        # where the upper triangles of the N position blocks land in P's CSC data
-        rank = np.empty_like(layout.p_perm)
-        rank[layout.p_perm] = np.arange(layout.p_perm.size)
-        self._p_blocks = rank[layout.p_n_vel:].reshape(N, layout.p_term_idx[0].size)
         # D2' c with c = (V_0, 0, ..., 0) touches only D2's first column
         self._jerk_column = layout.d2_t[:, [0]].toarray()
         q = np.zeros(layout.n)
@@ -73,18 +69,14 @@ class RequestTemplate:
         l[layout.row["slack"].slice], u[layout.row["slack"].slice] = 0.0, np.inf
         self.q, self.q_hard, self.l, self.u = q, q_hard, l, u
         for value in (self.v0_low, self.v0_high, self.velocity_low, self.velocity_high, self._p_data,
-                      self._p_blocks, self._jerk_column, q, q_hard, l, u):
+                      self._jerk_column, q, q_hard, l, u):
             value.setflags(write=False)
 
     def p_data(self, terminal: np.ndarray, stage: np.ndarray) -> np.ndarray:
         """``P`` data (CSC order) with the Hessian blocks ``stage`` (3, 3) on every ``p_i`` and
         ``stage + terminal`` on ``p_N``: :meth:`QpLayout.p_data` of this template's velocity block."""
-        tr, tc = self.layout.p_term_idx
-        blocks = np.empty(self._p_blocks.shape)
-        blocks[:] = stage[tr, tc]
-        blocks[-1] += terminal[tr, tc]
         data = self._p_data.copy()
-        data[self._p_blocks] = blocks
+        self.layout.write_p_blocks(data, terminal, stage)
         return data
 
     def jerk_q(self, v0: np.ndarray) -> np.ndarray:

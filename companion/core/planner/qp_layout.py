@@ -280,6 +280,11 @@ class QpLayout:
         cols = np.concatenate([self.p_vel_cols, (starts[:, None] + tc).ravel()])
         self.p_n_vel = key.size
         self.p_indices, self.p_indptr, self.p_perm = _csc_pattern(rows, cols, (self.n, self.n))
+        # where each entry lands in the CSC data: the velocity block's, and the position blocks' (N, 6)
+        rank = np.empty_like(self.p_perm)
+        rank[self.p_perm] = np.arange(self.p_perm.size)
+        self.p_vel_slots = rank[:key.size]
+        self.p_block_slots = rank[key.size:].reshape(N, tr.size)
 
     def p_data(self, jerk_scale: float, effort_scale: float, terminal: np.ndarray,
                stage: np.ndarray | None = None) -> np.ndarray:
@@ -296,11 +301,20 @@ class QpLayout:
         stage : (3, 3) array, optional
             Hessian block on every ``p_i`` (progress cost), added to the terminal block on ``p_N``.
         """
-        vel = jerk_scale * self.p_vel_jerk + effort_scale * self.p_vel_diag
-        blocks = np.zeros((self.N, 3, 3)) if stage is None else np.broadcast_to(stage, (self.N, 3, 3)).copy()
-        blocks[-1] += terminal
-        data = np.concatenate([vel, blocks[:, self.p_term_idx[0], self.p_term_idx[1]].ravel()])
-        return data[self.p_perm]
+        data = np.empty(self.p_perm.size)
+        data[self.p_vel_slots] = jerk_scale * self.p_vel_jerk + effort_scale * self.p_vel_diag
+        self.write_p_blocks(data, terminal, stage)
+        return data
+
+    def write_p_blocks(self, data: np.ndarray, terminal: np.ndarray, stage: np.ndarray | None = None) -> None:
+        """Write the position blocks of :meth:`p_data` into ``data`` (CSC order) in place: ``stage``
+        (zero if None) on every ``p_i``, ``stage + terminal`` on ``p_N`` (upper triangles)."""
+        tr, tc = self.p_term_idx
+        blocks = np.zeros(self.p_block_slots.shape)
+        if stage is not None:
+            blocks[:] = stage[tr, tc]
+        blocks[-1] += terminal[tr, tc]
+        data[self.p_block_slots] = blocks
 
     def p_matrix(self, data_csc: np.ndarray) -> sp.csc_matrix:
         return sp.csc_matrix((data_csc, self.p_indices, self.p_indptr), shape=(self.n, self.n))
