@@ -142,7 +142,8 @@ class SourceClock:
         if len(pts) < self.min_bins_for_drift:
             return float(pts[:, 1].min()), 0.0, math.nan
         t, off = pts[:, 0], pts[:, 1]
-        n = len(pts)   # numpy's mean is this sum over n, without its per-call Python layer (once per report)
+        # numpy's mean is this sum over n, without its per-call Python layer (a fit per change of the bins)
+        n = len(pts)
         t_mean, off_mean = np.add.reduce(t) / n, np.add.reduce(off) / n
         tc = t - t_mean
         denom = float(np.dot(tc, tc))
