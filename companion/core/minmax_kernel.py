@@ -213,7 +213,7 @@ def shared_pairs3(c1: np.ndarray, c2: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
-            u_tol: float, max_newton: int) -> tuple[dict[str, np.ndarray], int]:
+            u_tol: float, max_newton: int) -> tuple[np.ndarray, int]:
     """The separator fields of ``n`` validated 3-D pairs, and how many pairs did not converge.
 
     Parameters
@@ -227,17 +227,16 @@ def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
 
     Returns
     -------
-    fields : dict
-        ``lam``, ``eta``, ``residual``, ``beta``, ``s1``, ``s2`` (n,) and
-        ``alpha``, ``normal``, ``eta_grad_mu1`` (3, n).
+    fields : (15, n) array
+        One buffer: rows 0 to 5 are ``lam``, ``eta``, ``residual``, ``beta``, ``s1``,
+        ``s2``; rows 6-8, 9-11 and 12-14 the x, y, z components of ``alpha``, ``normal``
+        and ``eta_grad_mu1`` (one allocation instead of nine; the kernel writes each field
+        into a C-contiguous row view, as it wrote the separate arrays).
     stalled : int
         Pairs whose iteration hit ``max_newton`` steps.
     """
-    n = m1.shape[1]
-    out = {name: np.empty(n) for name in ("lam", "eta", "residual", "beta", "s1", "s2")}
-    out.update({name: np.empty((3, n)) for name in ("alpha", "normal", "eta_grad_mu1")})
+    out = np.empty((15, m1.shape[1]))
     stalled = _minmax3()(np.ascontiguousarray(m1), np.ascontiguousarray(m2), np.ascontiguousarray(s1),
                           np.ascontiguousarray(s2), float(u_tol), int(max_newton),
-                          out["lam"], out["eta"], out["residual"], out["alpha"], out["beta"], out["normal"],
-                          out["s1"], out["s2"], out["eta_grad_mu1"])
+                          out[0], out[1], out[2], out[6:9], out[3], out[9:12], out[4], out[5], out[12:15])
     return out, int(stalled)

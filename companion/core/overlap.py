@@ -387,8 +387,12 @@ def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...],
         fields, stalled = minmax_kernel.minmax3(m1, m2, S1, S2, _U_TOL, _MAX_NEWTON)
         if stalled:
             logger.warning("minmax: Newton iteration hit %d steps on %d pair(s)", _MAX_NEWTON, stalled)
-        return MinmaxResult(**{name: (v.reshape(lead) if v.ndim == 1 else v.T.reshape(lead + (d,)))
-                               for name, v in fields.items()})
+        # views in the numpy kernel's layout: scalars lead-shaped, vectors (lead, d) with the
+        # components a row apart (what `v.T.reshape(lead + (d,))` of a (d, n) field gives)
+        lam, eta, residual, beta, s1, s2 = fields[:6].reshape((6,) + lead)
+        alpha, normal, grad = fields[6:].reshape(3, d, n).transpose(0, 2, 1).reshape((3,) + lead + (d,))
+        return MinmaxResult(lam=lam, eta=eta, alpha=alpha, beta=beta, normal=normal, s1=s1, s2=s2,
+                            eta_grad_mu1=grad, residual=residual)
     delta = m2 - m1
     scale = np.sqrt(np.maximum(sum(S1[i][i] for i in range(d)), sum(S2[i][i] for i in range(d))))
     coincident = np.sqrt(K.dot(delta, delta)) <= 1e-15 * scale

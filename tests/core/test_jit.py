@@ -84,6 +84,8 @@ def test_that_the_compiled_minmax_gives_the_numpy_kernels_bits(seed):
     for field in ("lam", "eta", "alpha", "beta", "normal", "s1", "s2", "eta_grad_mu1", "residual"):
         a, b = getattr(fast, field), getattr(slow, field)
         assert a.shape == b.shape, field
+        # the same layout too: einsum's order of summation over a field follows its strides
+        assert a.strides == b.strides, field
         if exact:
             np.testing.assert_array_equal(a, b, err_msg=field)
         else:  # numpy's own SIMD exp/log (AVX-512): the last bits may differ
