@@ -176,7 +176,8 @@ class RequestData:
         u[layout.row["wall"].slice] = wall_upper.ravel()
         # sensing range: distance from the drone now to each obstacle's first predicted mean
         if request.num_obstacles:
-            dist = np.linalg.norm(request.obstacle_means[:, 0, :] - request.position, axis=-1)
+            d = request.obstacle_means[:, 0, :] - request.position
+            dist = np.sqrt(np.add.reduce(d * d, axis=-1))     # numpy's norm over the last axis, without its checks
             in_range = dist <= cfg.sensing_range_m
         else:
             in_range = np.zeros(0, dtype=bool)

@@ -171,7 +171,7 @@ class Planner:
             if not new.solution.accurate:
                 notes.append(f"solver: {new.solution.status} at iteration {iterations}")
             step = new
-            moved = float(np.max(np.abs(step.velocities - v_bar)))
+            moved = float(np.abs(step.velocities - v_bar).max())
             v_bar, p_bar = step.velocities, step.positions
             lam_bar = step.lam if form.carries_lam else None
             # convergence on the cost without penalties: slacks at OSQP's tolerance times the
@@ -277,9 +277,10 @@ class Planner:
             velocities, positions = step.velocities.copy(), step.positions.copy()
             slack_max = step.safety_slack
             cost = step.objective
-            upper = float(step.slack_upper[data.upper_active].max(initial=0.0))
-            if upper > C_MAX_SLACK_TOL:
-                notes.append(f"c_max_violated: slack {upper:.3g}")
+            if self.formulation.has_upper:      # else there is no c_max slack (zeros)
+                upper = float(step.slack_upper[data.upper_active].max(initial=0.0))
+                if upper > C_MAX_SLACK_TOL:
+                    notes.append(f"c_max_violated: slack {upper:.3g}")
         figs, ok = self.formulation.recheck(request, positions, data.in_range)
         # Out of budget with an unsafe last solution: a least-violation solution (it carries
         # the slack the situation forced) is flown as a slack plan, as without a budget
