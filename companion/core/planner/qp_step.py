@@ -19,6 +19,7 @@ from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import LAM_EPS, Formulation, ObstacleRows, relax_out_of_range
 from companion.core.planner.osqp_qp import MAX_ITER, OsqpQp, QpSolution
 from companion.core.planner.qp_data import RequestData, RequestTemplate
+from companion.core.planner.row_writes import write_rows
 
 logger = logging.getLogger(__name__)
 
@@ -46,7 +47,8 @@ class QpStep:
         the row; 0 without such rows).
     objective : cost at the solution including constants and slack penalties (slacks clipped at 0).
     cost : ``objective`` without the slack penalties (terminal + jerk + effort).
-    rows : the linearised obstacle rows used.
+    rows : the linearised obstacle rows, as the formulation gave them (in the QP the rows of
+        obstacles out of sensing range are inactive: :func:`relax_out_of_range` of these).
     velocity_lower, velocity_upper : (N, 3) velocity box (bounds ∩ trust region).
     lam_lower, lam_upper : (P, N) ``lam`` box (``paper``).
     wall_upper : (W, N) right-hand sides of the wall rows.
@@ -124,12 +126,6 @@ def _largest(arrays: tuple[np.ndarray, ...]) -> float:
     return max((float(np.maximum.reduce(a, axis=None)) for a in arrays if a.size), default=0.0)
 
 
-def linearise(formulation: Formulation, data: RequestData, positions: np.ndarray,
-              lam: np.ndarray | None) -> ObstacleRows:
-    """The formulation's rows around ``positions`` with out-of-range obstacles made inactive."""
-    return relax_out_of_range(formulation.rows(data.request, positions, lam), data.in_range)
-
-
 def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data: RequestData, v_bar: np.ndarray,
              p_bar: np.ndarray, lam_bar: np.ndarray | None, budget: WorkBudget, *, first: bool,
              try_hard: bool = True) -> QpStep | None:
@@ -144,26 +140,21 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     N, P = layout.N, layout.P
     if lam_bar is not None:
         lam_bar = np.clip(lam_bar, LAM_EPS, 1.0 - LAM_EPS)     # OSQP meets the box only to tolerance
-    rows = linearise(formulation, data, p_bar, lam_bar)
+    rows = formulation.rows(data.request, p_bar, lam_bar)
     a_slot, l, u = ws.a_slot, ws.l, ws.u
-    a_slot[layout.slot["obs_p"].slice] = rows.coef_p.ravel()
-    l[layout.row["obs"].slice], u[layout.row["obs"].slice] = rows.lower.ravel(), np.inf
-    if layout.upper:
-        a_slot[layout.slot["obs_hi_p"].slice] = rows.coef_p.ravel()
-        upper = np.where(data.upper_active[:, None], rows.upper, np.inf)  # c_max released where masked
-        l[layout.row["obs_hi"].slice], u[layout.row["obs_hi"].slice] = -np.inf, upper.ravel()
-    # velocity box ∩ trust region around the iterate
-    tr, template = cfg.trust_region_mps, ws.template
-    v_lo, v_hi = np.maximum(template.velocity_low, v_bar - tr), np.minimum(template.velocity_high, v_bar + tr)
-    l[layout.row["vbox"].slice], u[layout.row["vbox"].slice] = v_lo.ravel(), v_hi.ravel()
+    # obstacle rows (out of range: inactive; c_max released where masked), the velocity box
+    # (bounds ∩ trust region around the iterate) and the hard QP's slack bounds (below)
+    v_lo, v_hi = write_rows(layout, rows, data.in_range, data.upper_active, v_bar, cfg.trust_region_mps,
+                            ws.template.velocity_low, ws.template.velocity_high, a_slot, l, u)
     lam_lo = lam_hi = np.zeros((P, 0))
     if layout.paper:
-        a_slot[layout.slot["obs_lam"].slice] = rows.coef_lam.ravel()
+        relaxed = relax_out_of_range(rows, data.in_range)
+        a_slot[layout.slot["obs_lam"].slice] = relaxed.coef_lam.ravel()
         if layout.upper:
-            a_slot[layout.slot["obs_hi_lam"].slice] = rows.coef_lam.ravel()
-        a_slot[layout.slot["adm_p"].slice] = rows.adm_p.ravel()
-        a_slot[layout.slot["adm_lam"].slice] = rows.adm_lam.ravel()
-        l[layout.row["adm"].slice] = u[layout.row["adm"].slice] = rows.adm_rhs.ravel()
+            a_slot[layout.slot["obs_hi_lam"].slice] = relaxed.coef_lam.ravel()
+        a_slot[layout.slot["adm_p"].slice] = relaxed.adm_p.ravel()
+        a_slot[layout.slot["adm_lam"].slice] = relaxed.adm_lam.ravel()
+        l[layout.row["adm"].slice] = u[layout.row["adm"].slice] = relaxed.adm_rhs.ravel()
         lam_lo = np.maximum(LAM_EPS, lam_bar - cfg.trust_region_lam)
         lam_hi = np.minimum(1.0 - LAM_EPS, lam_bar + cfg.trust_region_lam)
         l[layout.row["lambox"].slice], u[layout.row["lambox"].slice] = lam_lo.ravel(), lam_hi.ravel()
@@ -177,9 +168,6 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     # one (the leader still far ahead) must not make the safety rows soft. Pinned, it
     # did: the corridor run then traded wall and c_min slack against the terminal cost
     # and touched a wall (measured).
-    slack_rows = layout.row["slack"].slice
-    u[slack_rows] = np.inf
-    u[layout.row["slack"].start + layout.safety_slacks] = 0.0
     qp = ws.qp
     if qp is None:
         qp = ws.qp = OsqpQp(layout, data.p_data, data.q_hard, a_data, l, u, eps=cfg.solver_eps,

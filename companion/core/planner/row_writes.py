@@ -1,0 +1,109 @@
+"""What an SCP iteration writes into its QP before the solve, as one compiled pass.
+
+Per QP the SCP writes the linearised obstacle rows (their ``A`` coefficients and bounds,
+with the rows of obstacles out of sensing range made inactive and the ``c_max`` side
+released where it does not apply), the velocity box (the speed bounds intersected with
+the trust region around the iterate) and the slack bounds of the hard QP (safety slacks
+pinned to 0, the ``c_max`` slack free). In numpy that is about fifteen small operations
+on arrays of a hundred entries, each of which, timed inside the replans, costs several
+microseconds; :func:`write_rows` does it in one loop when numba is available and with
+those operations otherwise. Both give the same bytes: copies, ``+0.0`` and ``+-inf``
+for inactive entries, and numpy's ``maximum``/``minimum`` (on a tie the second operand,
+NaN propagated), which ``tests/core/test_row_writes.py`` checks. Units: the rows' own
+(metres for the hyperplane rows), velocities in m/s.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from companion.core import jit
+from companion.core.planner.formulations import ObstacleRows, relax_out_of_range
+from companion.core.planner.qp_layout import QpLayout
+
+
+def _signature(t):
+    """Rows (P, N, 3), (P, N), (P, N), masks (P,), the iterate (N, 3) and the speed bounds (3,); the QP's vectors out."""
+    r1, r2, r3, b1 = jit.readonly(t, 1), jit.readonly(t, 2), jit.readonly(t, 3), t.Array(t.boolean, 1, "C", readonly=True)
+    w1, w2, i1 = t.float64[::1], t.float64[:, ::1], t.Array(t.intp, 1, "C", readonly=True)
+    return t.void(r3, r2, r2, b1, b1, t.boolean, r2, t.float64, r1, r1, w1, w1, w1,
+                  t.intp, t.intp, t.intp, t.intp, t.intp, t.intp, t.intp, i1, w2, w2)
+
+
+@jit.lazy(_signature)
+def _write_rows(coef_p, lower, upper, in_range, upper_active, has_upper, v_bar, trust, v_low, v_high,
+                a_slot, l, u, slot_p, row_obs, slot_hi_p, row_hi, row_vbox, row_slack, slack_count, safety,
+                v_lo, v_hi):
+    """:func:`write_rows` in one loop (the same values as the numpy form there)."""
+    inf = math.inf
+    n_obs, n_steps = lower.shape[0], lower.shape[1]
+    for j in range(n_obs):
+        on = in_range[j]
+        hi_on = on and upper_active[j]
+        for i in range(n_steps):
+            k = j * n_steps + i
+            for c in range(3):
+                value = coef_p[j, i, c] if on else 0.0
+                a_slot[slot_p + 3 * k + c] = value
+                if has_upper:
+                    a_slot[slot_hi_p + 3 * k + c] = value
+            l[row_obs + k] = lower[j, i] if on else -inf
+            u[row_obs + k] = inf
+            if has_upper:
+                l[row_hi + k] = -inf
+                u[row_hi + k] = upper[j, i] if hi_on else inf
+    for i in range(v_bar.shape[0]):
+        for c in range(3):
+            a, b = v_low[c], v_bar[i, c] - trust
+            lo = a if (a > b or a != a) else b
+            a, b = v_high[c], v_bar[i, c] + trust
+            hi = a if (a < b or a != a) else b
+            v_lo[i, c], v_hi[i, c] = lo, hi
+            l[row_vbox + 3 * i + c], u[row_vbox + 3 * i + c] = lo, hi
+    for k in range(slack_count):
+        u[row_slack + k] = inf
+    for k in range(safety.shape[0]):
+        u[row_slack + safety[k]] = 0.0
+
+
+def write_rows(layout: QpLayout, rows: ObstacleRows, in_range: np.ndarray, upper_active: np.ndarray,
+               v_bar: np.ndarray, trust_mps: float, v_low: np.ndarray, v_high: np.ndarray,
+               a_slot: np.ndarray, l: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Write one QP's obstacle rows, velocity box and hard slack bounds into ``a_slot``, ``l``, ``u``.
+
+    ``rows``: the formulation's rows (P, N) as linearised; obstacles not ``in_range`` (P,)
+    get zero coefficients and ``(-inf, inf)`` bounds, the ``c_max`` side (when the layout
+    has it) is released (``+inf``) where ``upper_active`` (P,) is false. The velocity box is
+    ``[max(v_low, v_bar - trust), min(v_high, v_bar + trust)]`` (N, 3), m/s (``v_low``,
+    ``v_high``: the speed bounds, (3,)), and is returned.
+    Slack rows: upper bound ``+inf``, the safety slacks' 0. The ``paper`` formulation's
+    ``lam`` and admissibility entries are not written here.
+    """
+    N = layout.N
+    v_lo, v_hi = np.empty((N, 3)), np.empty((N, 3))
+    slack = layout.row["slack"]
+    if jit.available():
+        _write_rows()(np.ascontiguousarray(rows.coef_p, dtype=float), np.ascontiguousarray(rows.lower, dtype=float),
+                      np.ascontiguousarray(rows.upper, dtype=float), np.ascontiguousarray(in_range, dtype=bool),
+                      np.ascontiguousarray(upper_active, dtype=bool), layout.upper,
+                      np.ascontiguousarray(v_bar, dtype=float), float(trust_mps), v_low, v_high, a_slot, l, u,
+                      layout.slot["obs_p"].start, layout.row["obs"].start,
+                      layout.slot["obs_hi_p"].start if layout.upper else 0,
+                      layout.row["obs_hi"].start if layout.upper else 0,
+                      layout.row["vbox"].start, slack.start, slack.size, layout.safety_slacks, v_lo, v_hi)
+        return v_lo, v_hi
+    rows = relax_out_of_range(rows, in_range)
+    a_slot[layout.slot["obs_p"].slice] = rows.coef_p.ravel()
+    l[layout.row["obs"].slice], u[layout.row["obs"].slice] = rows.lower.ravel(), np.inf
+    if layout.upper:
+        a_slot[layout.slot["obs_hi_p"].slice] = rows.coef_p.ravel()
+        upper = np.where(upper_active[:, None], rows.upper, np.inf)  # c_max released where masked
+        l[layout.row["obs_hi"].slice], u[layout.row["obs_hi"].slice] = -np.inf, upper.ravel()
+    np.maximum(v_low, v_bar - trust_mps, out=v_lo)
+    np.minimum(v_high, v_bar + trust_mps, out=v_hi)
+    l[layout.row["vbox"].slice], u[layout.row["vbox"].slice] = v_lo.ravel(), v_hi.ravel()
+    u[slack.slice] = np.inf
+    u[slack.start + layout.safety_slacks] = 0.0
+    return v_lo, v_hi

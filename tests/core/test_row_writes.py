@@ -1,0 +1,120 @@
+"""An SCP iteration's writes into its QP (companion.core.planner.row_writes): the compiled pass gives numpy's bytes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from companion.core import jit
+from companion.core.planner.formulations import ObstacleRows
+from companion.core.planner.qp_layout import QpLayout
+from companion.core.planner.row_writes import write_rows
+from companion.core.planner.vehicle_model import model_from_config
+from tests.core.test_jit import _numba_unimportable, _require_compiled
+
+
+def _layout(rng: np.random.Generator, upper: bool) -> QpLayout:
+    N, P, W = int(rng.integers(1, 12)), int(rng.integers(0, 5)), int(rng.integers(0, 3))
+    lag = model_from_config(0.3, float(rng.choice([0.0, 0.3])), None)
+    return QpLayout(N, P, W, paper=False, upper=upper, step_s=0.3, lag=lag)
+
+
+def _signed(rng: np.random.Generator, shape: tuple[int, ...], scale: float) -> np.ndarray:
+    """Random values with some signed zeros and infinities."""
+    a = rng.normal(0.0, scale, shape)
+    pick = rng.random(shape)
+    a[pick < 0.1] = 0.0
+    a[(pick >= 0.1) & (pick < 0.2)] = -0.0
+    a[(pick >= 0.2) & (pick < 0.25)] = np.inf
+    a[(pick >= 0.25) & (pick < 0.3)] = -np.inf
+    return a
+
+
+def _case(rng: np.random.Generator, layout: QpLayout):
+    """Rows, masks, an iterate with ties against the box (signed zeros too) and NaN, the box (NaN too), the trust radius."""
+    P, N = layout.P, layout.N
+    rows = ObstacleRows(coef_p=_signed(rng, (P, N, 3), 1.0), lower=_signed(rng, (P, N), 5.0),
+                        upper=_signed(rng, (P, N), 5.0))
+    in_range, upper_active = rng.random(P) < 0.7, rng.random(P) < 0.5
+    trust = float(rng.choice([0.5, 1.0]))
+    v_low, v_high = rng.choice([-3.0, -0.0, 0.0, -1.0, np.nan], 3), rng.choice([3.0, 0.0, -0.0, 1.0, np.nan], 3)
+    v_bar = rng.normal(0.0, 2.0, (N, 3))
+    tie = rng.random((N, 3))
+    v_bar[tie < 0.15] = trust                               # v_bar - trust = +0 against a zero bound
+    v_bar[(tie >= 0.15) & (tie < 0.3)] = -trust             # v_bar + trust = +0 likewise
+    v_bar[(tie >= 0.3) & (tie < 0.4)] = (v_low + trust)[np.nonzero((tie >= 0.3) & (tie < 0.4))[1]]
+    v_bar[(tie >= 0.4) & (tie < 0.45)] = np.nan
+    return rows, in_range, upper_active, v_bar, trust, v_low, v_high
+
+
+def _written(layout: QpLayout, case, seed: int):
+    """The QP's vectors after :func:`write_rows` from the same start (random, so untouched entries count too)."""
+    rng = np.random.default_rng(seed)
+    a_slot, l, u = rng.normal(size=layout.a_data0.size), rng.normal(size=layout.m), rng.normal(size=layout.m)
+    v_lo, v_hi = write_rows(layout, *case[:2], case[2], case[3], case[4], case[5], case[6], a_slot, l, u)
+    return [a.tobytes() for a in (a_slot, l, u, v_lo, v_hi)]
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1), st.booleans())
+def test_that_the_compiled_writes_give_numpys_bytes(seed, upper):
+    """Obstacle rows (inactive out of range, c_max released where masked), the velocity box with
+    numpy's maximum and minimum (ties give the second operand, NaN propagates) and the slack
+    bounds: every byte of A's slots, l, u and the box the same from the compiled pass and numpy."""
+    _require_compiled()
+    rng = np.random.default_rng(seed)
+    layout = _layout(rng, upper)
+    case = _case(rng, layout)
+    compiled = _written(layout, case, seed)
+    with _numba_unimportable():
+        assert not jit.available()
+        reference = _written(layout, case, seed)
+    assert compiled == reference
+
+
+def test_that_the_writes_make_out_of_range_rows_inactive_and_pin_the_safety_slacks():
+    """What the writes mean, on a small case: an obstacle out of range has zero coefficients and
+    (-inf, inf) bounds; c_max is released where it does not apply; safety slacks are pinned to 0
+    and the c_max slack is free; the box is the bounds within the trust radius of the iterate."""
+    layout = QpLayout(2, 2, 1, paper=False, upper=True, step_s=0.3, lag=model_from_config(0.3, 0.0, None))
+    rows = ObstacleRows(coef_p=np.full((2, 2, 3), 0.5), lower=np.full((2, 2), 1.0), upper=np.full((2, 2), 2.0))
+    a_slot, l, u = np.zeros(layout.a_data0.size), np.zeros(layout.m), np.zeros(layout.m)
+    v_bar = np.array([[0.0, 2.5, -1.0], [1.0, 1.0, 1.0]])
+    v_lo, v_hi = write_rows(layout, rows, np.array([True, False]), np.array([False, True]), v_bar, 1.0,
+                            np.full(3, -3.0), np.full(3, 3.0), a_slot, l, u)
+    obs_p = a_slot[layout.slot["obs_p"].slice].reshape(2, 2, 3)
+    assert np.all(obs_p[0] == 0.5) and np.all(obs_p[1] == 0.0)
+    obs_l, obs_u = l[layout.row["obs"].slice].reshape(2, 2), u[layout.row["obs"].slice].reshape(2, 2)
+    assert np.all(obs_l[0] == 1.0) and np.all(obs_l[1] == -np.inf) and np.all(obs_u == np.inf)
+    hi_l, hi_u = l[layout.row["obs_hi"].slice], u[layout.row["obs_hi"].slice].reshape(2, 2)
+    assert np.all(hi_l == -np.inf) and np.all(hi_u == np.inf)    # obstacle 0: masked; 1: out of range
+    np.testing.assert_array_equal(v_lo, [[-1.0, 1.5, -2.0], [0.0, 0.0, 0.0]])
+    np.testing.assert_array_equal(v_hi, [[1.0, 3.0, 0.0], [2.0, 2.0, 2.0]])
+    slack_u = u[layout.row["slack"].slice]
+    safety = np.zeros(slack_u.size, dtype=bool)
+    safety[layout.safety_slacks] = True
+    assert np.all(slack_u[safety] == 0.0) and np.all(slack_u[~safety] == np.inf) and (~safety).any()
+
+
+@pytest.mark.parametrize("upper", [False, True])
+def test_that_the_writes_leave_the_rest_of_the_qp_alone(upper):
+    """Entries outside the obstacle rows, the box and the slack rows keep what they held."""
+    rng = np.random.default_rng(3)
+    layout = QpLayout(4, 2, 2, paper=False, upper=upper, step_s=0.3, lag=model_from_config(0.3, 0.3, None))
+    case = _case(rng, layout)
+    a_slot, l, u = rng.normal(size=layout.a_data0.size), rng.normal(size=layout.m), rng.normal(size=layout.m)
+    before = a_slot.copy(), l.copy(), u.copy()
+    write_rows(layout, *case[:2], case[2], case[3], case[4], case[5], case[6], a_slot, l, u)
+    touched_slots = np.zeros(a_slot.size, dtype=bool)
+    touched_slots[layout.slot["obs_p"].slice] = True
+    rows_l, rows_u = np.zeros(layout.m, dtype=bool), np.zeros(layout.m, dtype=bool)
+    for name in ("obs", "vbox") + (("obs_hi",) if upper else ()):
+        rows_l[layout.row[name].slice] = rows_u[layout.row[name].slice] = True
+    if upper:
+        touched_slots[layout.slot["obs_hi_p"].slice] = True
+    rows_u[layout.row["slack"].slice] = True
+    np.testing.assert_array_equal(a_slot[~touched_slots], before[0][~touched_slots])
+    np.testing.assert_array_equal(l[~rows_l], before[1][~rows_l])
+    np.testing.assert_array_equal(u[~rows_u], before[2][~rows_u])
