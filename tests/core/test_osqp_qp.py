@@ -56,6 +56,30 @@ def test_that_plans_are_the_same_bits_through_the_extension_and_through_osqps_wr
             assert np.asarray(getattr(a, field)).tobytes() == np.asarray(getattr(b, field)).tobytes(), field
 
 
+@pytest.mark.parametrize("direct", [True, False])
+def test_that_a_solution_is_the_callers_own(direct):
+    """A solution's ``x`` and ``y`` are copies: the next update and solve, and writing into them, leave
+    the solver's next answer and the earlier solution alone (the extension hands back new arrays)."""
+    cfg, req = scenario_one()
+    with pytest.MonkeyPatch.context() as mp:
+        if not direct:
+            mp.setattr(osqp_qp, "_extension_solver", lambda wrapper: None)
+        planner = Planner(cfg)
+        planner.solve(req)
+        qp = planner.solver((req.horizon_steps, req.num_obstacles, req.num_walls))
+        first = qp.solve()
+        kept_x, kept_y = first.x.copy(), first.y.copy()
+        first.x[:], first.y[:] = np.nan, np.nan            # the caller's arrays: its to write
+        again = qp.solve()
+        assert np.isfinite(again.x).all() and np.isfinite(again.y).all()
+        first.x[:], first.y[:] = kept_x, kept_y
+        qp.warm_start(x=np.zeros_like(kept_x), y=np.zeros_like(kept_y))
+        qp.solve(max_iter=1)
+        np.testing.assert_array_equal(first.x, kept_x)
+        np.testing.assert_array_equal(first.y, kept_y)
+        assert not np.shares_memory(first.x, again.x) and not np.shares_memory(first.y, again.y)
+
+
 def test_that_the_compiled_p_product_gives_scipys_bits():
     """``OsqpQp.p_times`` (the objective's ``P x``, compiled) against scipy's CSR product, before and
     after new ``P`` data, on vectors with signed zeros and entries over twelve decades."""

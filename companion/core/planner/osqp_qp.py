@@ -167,14 +167,15 @@ class OsqpQp:
             self._max_iter = max_iter
         if ext is None:
             r = self._solver.solve(raise_error=False)
-            info, x, y = r.info, r.x, r.y
+            info, x, y = r.info, np.array(r.x, dtype=float), np.array(r.y, dtype=float)
         else:
             ext.solve()
-            info, x, y = ext.info, ext.solution.x, ext.solution.y
+            # the extension hands back a new array at every access: already a copy
+            info, x, y = ext.info, np.asarray(ext.solution.x, dtype=float), np.asarray(ext.solution.y, dtype=float)
         self._rho_adapted = info.rho_updates > 0
         status = info.status_val
         return QpSolution(
-            x=np.array(x, dtype=float), y=np.array(y, dtype=float),
+            x=x, y=y,
             objective=math.nan if status == osqp.SolverStatus.OSQP_NON_CVX else float(info.obj_val),
             status=str(info.status), usable=status in _ACCEPTABLE and bool(np.isfinite(x).all()),
             accurate=status in _SOLVED, iterations=int(info.iter), solve_time_s=float(info.solve_time),

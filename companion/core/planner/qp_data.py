@@ -36,6 +36,8 @@ class RequestTemplate:
         slacks unpenalised) and zero on ``V`` and ``p``.
     l, u : (m,) the bounds with the request's rows (``dyn``, walls' upper side) zero and
         the first acceleration and command rows without ``V_0``.
+    q_slack : ``q`` at the slack columns (``layout.slack_cols``): the slack penalties, the
+        same in every request's ``q``.
     """
 
     def __init__(self, config: PlannerConfig, layout: QpLayout) -> None:
@@ -68,8 +70,9 @@ class RequestTemplate:
         l[layout.row["wall"].slice] = -np.inf
         l[layout.row["slack"].slice], u[layout.row["slack"].slice] = 0.0, np.inf
         self.q, self.q_hard, self.l, self.u = q, q_hard, l, u
+        self.q_slack = q[layout.slack_cols]       # every request's q there (build writes V and p only)
         for value in (self.v0_low, self.v0_high, self.velocity_low, self.velocity_high, self._p_data,
-                      self._jerk_column, q, q_hard, l, u):
+                      self._jerk_column, q, q_hard, l, u, self.q_slack):
             value.setflags(write=False)
 
     def p_data(self, terminal: np.ndarray, stage: np.ndarray) -> np.ndarray:

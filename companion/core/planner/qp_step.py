@@ -19,7 +19,7 @@ from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import LAM_EPS, Formulation, ObstacleRows, relax_out_of_range
 from companion.core.planner.osqp_qp import MAX_ITER, OsqpQp, QpSolution
 from companion.core.planner.qp_data import RequestData, RequestTemplate
-from companion.core.planner.row_writes import write_rows
+from companion.core.planner.qp_vectors import read_solution, write_rows
 
 logger = logging.getLogger(__name__)
 
@@ -196,17 +196,13 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     x = sol.x
     # cost at the solution with slacks clipped at 0: OSQP meets "s >= 0" only to its
     # tolerance, and a slightly negative slack times the large penalty would bias J
-    xc = x.copy()
-    xc[layout.slack_cols] = np.maximum(xc[layout.slack_cols], 0.0)
+    xc, xs, s_lo, s_hi, s_wall = read_solution(layout, x)
     objective = 0.5 * float(xc @ qp.p_times(xc)) + float(data.q @ xc) + data.constant
-    penalty = float(data.q[layout.slack_cols] @ xc[layout.slack_cols])
+    penalty = float(ws.template.q_slack @ xs)
     col = layout.col
     vel = x[col["V"].slice].reshape(N, 3)
     pos = x[col["p"].slice].reshape(N, 3)
     lam = x[col["lam"].slice].reshape(P, N) if layout.paper else np.zeros((P, N))
-    sig = layout.slack_scale
-    s_hi = sig * x[col["s_hi"].slice].reshape(P, N) if layout.upper else np.zeros((P, N))
-    s_lo, s_wall = sig * x[col["s_lo"].slice].reshape(P, N), sig * x[col["s_wall"].slice].reshape(layout.W, N)
     return QpStep(
         velocities=vel, positions=pos, lam=lam,
         slack_obstacle=s_lo, slack_upper=s_hi, slack_wall=s_wall,

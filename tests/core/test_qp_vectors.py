@@ -1,4 +1,5 @@
-"""An SCP iteration's writes into its QP (companion.core.planner.row_writes): the compiled pass gives numpy's bytes."""
+"""An SCP iteration's writes into its QP and reads from its solution (companion.core.planner.qp_vectors):
+the compiled passes give numpy's bytes, and mean what they say."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from hypothesis import strategies as st
 from companion.core import jit
 from companion.core.planner.formulations import ObstacleRows
 from companion.core.planner.qp_layout import QpLayout
-from companion.core.planner.row_writes import write_rows
+from companion.core.planner.qp_vectors import read_solution, write_rows
 from companion.core.planner.vehicle_model import model_from_config
 from tests.core.test_jit import _numba_unimportable, _require_compiled
 
@@ -118,3 +119,45 @@ def test_that_the_writes_leave_the_rest_of_the_qp_alone(upper):
     np.testing.assert_array_equal(a_slot[~touched_slots], before[0][~touched_slots])
     np.testing.assert_array_equal(l[~rows_l], before[1][~rows_l])
     np.testing.assert_array_equal(u[~rows_u], before[2][~rows_u])
+
+
+def _solution(rng: np.random.Generator, layout: QpLayout) -> np.ndarray:
+    """A solution vector with negative, signed-zero, infinite and NaN entries, slack columns included."""
+    x = _signed(rng, (layout.n,), 1.0)
+    x[rng.random(layout.n) < 0.03] = np.nan
+    return x
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1), st.booleans(), st.booleans())
+def test_that_the_compiled_reading_gives_numpys_bytes(seed, upper, paper):
+    """The solution with its slacks clipped at 0, the clipped slacks, and the slacks per row scaled
+    by the layout's slack scale: the same bytes from the compiled pass and numpy."""
+    _require_compiled()
+    rng = np.random.default_rng(seed)
+    N, P, W = int(rng.integers(1, 12)), int(rng.integers(0, 5)), int(rng.integers(0, 3))
+    layout = QpLayout(N, P, W, paper=paper, upper=upper, step_s=0.3, lag=model_from_config(0.3, 0.0, None),
+                      slack_scale=float(rng.choice([1.0, 0.25])))
+    x = _solution(rng, layout)
+    compiled = [a.tobytes() for a in read_solution(layout, x)]
+    with _numba_unimportable():
+        reference = [a.tobytes() for a in read_solution(layout, x)]
+    assert compiled == reference
+
+
+def test_that_the_reading_clips_only_the_slacks():
+    """``xc`` is ``x`` except at the slack columns, which are ``max(x, 0)`` (-0 becomes +0); the
+    slacks per row are the columns times the slack scale; ``s_hi`` is zero without c_max rows."""
+    layout = QpLayout(3, 2, 1, paper=False, upper=False, step_s=0.3, lag=model_from_config(0.3, 0.0, None),
+                      slack_scale=0.5)
+    x = np.linspace(-1.0, 1.0, layout.n)
+    x[layout.slack_cols[0]] = -0.0
+    xc, xs, s_lo, s_hi, s_wall = read_solution(layout, x)
+    other = np.ones(layout.n, dtype=bool)
+    other[layout.slack_cols] = False
+    np.testing.assert_array_equal(xc[other], x[other])
+    np.testing.assert_array_equal(xs, np.maximum(x[layout.slack_cols], 0.0))
+    assert not np.signbit(xs[0]) and xc[layout.slack_cols[0]] == 0.0
+    np.testing.assert_array_equal(s_lo, 0.5 * x[layout.col["s_lo"].slice].reshape(2, 3))
+    np.testing.assert_array_equal(s_wall, 0.5 * x[layout.col["s_wall"].slice].reshape(1, 3))
+    assert s_hi.shape == (2, 3) and not s_hi.any()

@@ -1,16 +1,18 @@
-"""What an SCP iteration writes into its QP before the solve, as one compiled pass.
+"""What an SCP iteration writes into its QP before the solve, and reads from the solution after.
 
 Per QP the SCP writes the linearised obstacle rows (their ``A`` coefficients and bounds,
 with the rows of obstacles out of sensing range made inactive and the ``c_max`` side
 released where it does not apply), the velocity box (the speed bounds intersected with
 the trust region around the iterate) and the slack bounds of the hard QP (safety slacks
-pinned to 0, the ``c_max`` slack free). In numpy that is about fifteen small operations
-on arrays of a hundred entries, each of which, timed inside the replans, costs several
-microseconds; :func:`write_rows` does it in one loop when numba is available and with
-those operations otherwise. Both give the same bytes: copies, ``+0.0`` and ``+-inf``
-for inactive entries, and numpy's ``maximum``/``minimum`` (on a tie the second operand,
-NaN propagated), which ``tests/core/test_row_writes.py`` checks. Units: the rows' own
-(metres for the hyperplane rows), velocities in m/s.
+pinned to 0, the ``c_max`` slack free): :func:`write_rows`. After the solve it reads the
+solution with its slacks clipped at 0 (for the cost) and the slacks per row:
+:func:`read_solution`. In numpy each is about a dozen small operations on arrays of a
+hundred entries, and each of those, timed inside the replans, costs several
+microseconds; with numba each is one loop, otherwise those operations run. Both give
+the same bytes: copies, products, ``+0.0`` and ``+-inf`` for inactive entries, and
+numpy's ``maximum``/``minimum`` (on a tie the second operand, NaN propagated), which
+``tests/core/test_qp_vectors.py`` checks. Units: the rows' own (metres for the
+hyperplane rows), velocities in m/s.
 """
 
 from __future__ import annotations
@@ -107,3 +109,52 @@ def write_rows(layout: QpLayout, rows: ObstacleRows, in_range: np.ndarray, upper
     u[slack.slice] = np.inf
     u[slack.start + layout.safety_slacks] = 0.0
     return v_lo, v_hi
+
+
+def _read_signature(t):
+    """The solution (n,), the slack columns (intp), the slack scale and block starts; the readings out."""
+    w1, w2, i1 = t.float64[::1], t.float64[:, ::1], t.Array(t.intp, 1, "C", readonly=True)
+    return t.void(jit.readonly(t, 1), i1, t.float64, t.intp, t.intp, t.intp, t.boolean, w1, w1, w2, w2, w2)
+
+
+@jit.lazy(_read_signature)
+def _read_solution(x, slack_cols, scale, s_lo_col, s_hi_col, s_wall_col, has_upper, xc, xs, s_lo, s_hi, s_wall):
+    """:func:`read_solution` in one loop (the same values as the numpy form there)."""
+    for k in range(x.shape[0]):
+        xc[k] = x[k]
+    for k in range(slack_cols.shape[0]):
+        v = x[slack_cols[k]]
+        v = v if (v > 0.0 or v != v) else 0.0
+        xc[slack_cols[k]] = v
+        xs[k] = v
+    n_steps = s_lo.shape[1]
+    for j in range(s_lo.shape[0]):
+        for i in range(n_steps):
+            s_lo[j, i] = scale * x[s_lo_col + j * n_steps + i]
+            s_hi[j, i] = scale * x[s_hi_col + j * n_steps + i] if has_upper else 0.0
+    for w in range(s_wall.shape[0]):
+        for i in range(n_steps):
+            s_wall[w, i] = scale * x[s_wall_col + w * n_steps + i]
+
+
+def read_solution(layout: QpLayout, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                             np.ndarray]:
+    """What the SCP reads from a QP's solution ``x`` (n,).
+
+    Returns ``xc``: ``x`` with the slack columns clipped at 0 (``np.maximum(x, 0)``, the cost
+    is evaluated there); ``xs``: ``xc`` at ``layout.slack_cols``; and the slacks in their
+    rows' units (the columns times ``slack_scale``): ``s_lo`` (P, N), ``s_hi`` (P, N, zero
+    without ``c_max`` rows), ``s_wall`` (W, N).
+    """
+    P, N, W, col, sig = layout.P, layout.N, layout.W, layout.col, layout.slack_scale
+    if jit.available():
+        xc, xs = np.empty(x.shape[0]), np.empty(layout.slack_cols.shape[0])
+        s_lo, s_hi, s_wall = np.empty((P, N)), np.empty((P, N)), np.empty((W, N))
+        _read_solution()(np.ascontiguousarray(x, dtype=float), layout.slack_cols, float(sig), col["s_lo"].start,
+                         col["s_hi"].start, col["s_wall"].start, layout.upper, xc, xs, s_lo, s_hi, s_wall)
+        return xc, xs, s_lo, s_hi, s_wall
+    xc = x.copy()
+    xc[layout.slack_cols] = np.maximum(xc[layout.slack_cols], 0.0)
+    s_hi = sig * x[col["s_hi"].slice].reshape(P, N) if layout.upper else np.zeros((P, N))
+    s_lo, s_wall = sig * x[col["s_lo"].slice].reshape(P, N), sig * x[col["s_wall"].slice].reshape(W, N)
+    return xc, xc[layout.slack_cols], s_lo, s_hi, s_wall
