@@ -131,28 +131,39 @@ def _solution(rng: np.random.Generator, layout: QpLayout) -> np.ndarray:
 @settings(max_examples=60, deadline=None, derandomize=True)
 @given(st.integers(0, 2**32 - 1), st.booleans(), st.booleans())
 def test_that_the_compiled_reading_gives_numpys_bytes(seed, upper, paper):
-    """The solution with its slacks clipped at 0, the clipped slacks, and the slacks per row scaled
-    by the layout's slack scale: the same bytes from the compiled pass and numpy."""
+    """The solution with its slacks clipped at 0, the clipped slacks, the slacks per row scaled by
+    the layout's slack scale, and the largest safety slack (NaN, ties of +0 and -0, none at all):
+    the same bytes from the compiled pass and numpy."""
     _require_compiled()
     rng = np.random.default_rng(seed)
     N, P, W = int(rng.integers(1, 12)), int(rng.integers(0, 5)), int(rng.integers(0, 3))
     layout = QpLayout(N, P, W, paper=paper, upper=upper, step_s=0.3, lag=model_from_config(0.3, 0.0, None),
                       slack_scale=float(rng.choice([1.0, 0.25])))
     x = _solution(rng, layout)
-    compiled = [a.tobytes() for a in read_solution(layout, x)]
+    if rng.random() < 0.3:       # slacks at or below zero: the largest is a zero or negative, or NaN
+        x[layout.slack_cols] = rng.choice([0.0, -0.0, -1e-9, -2.0, np.nan], layout.slack_cols.size,
+                                          p=[0.3, 0.3, 0.2, 0.15, 0.05])
+    in_range = rng.random(P) < 0.7
+
+    def read():
+        *arrays, largest = read_solution(layout, x, in_range)
+        return [a.tobytes() for a in arrays] + [np.float64(largest).tobytes()]
+
+    compiled = read()
     with _numba_unimportable():
-        reference = [a.tobytes() for a in read_solution(layout, x)]
+        reference = read()
     assert compiled == reference
 
 
 def test_that_the_reading_clips_only_the_slacks():
     """``xc`` is ``x`` except at the slack columns, which are ``max(x, 0)`` (-0 becomes +0); the
-    slacks per row are the columns times the slack scale; ``s_hi`` is zero without c_max rows."""
+    slacks per row are the columns times the slack scale; ``s_hi`` is zero without c_max rows; the
+    largest safety slack leaves out obstacles out of range."""
     layout = QpLayout(3, 2, 1, paper=False, upper=False, step_s=0.3, lag=model_from_config(0.3, 0.0, None),
                       slack_scale=0.5)
     x = np.linspace(-1.0, 1.0, layout.n)
     x[layout.slack_cols[0]] = -0.0
-    xc, xs, s_lo, s_hi, s_wall = read_solution(layout, x)
+    xc, xs, s_lo, s_hi, s_wall, largest = read_solution(layout, x, np.array([True, False]))
     other = np.ones(layout.n, dtype=bool)
     other[layout.slack_cols] = False
     np.testing.assert_array_equal(xc[other], x[other])
@@ -161,3 +172,4 @@ def test_that_the_reading_clips_only_the_slacks():
     np.testing.assert_array_equal(s_lo, 0.5 * x[layout.col["s_lo"].slice].reshape(2, 3))
     np.testing.assert_array_equal(s_wall, 0.5 * x[layout.col["s_wall"].slice].reshape(1, 3))
     assert s_hi.shape == (2, 3) and not s_hi.any()
+    assert largest == max(s_lo[0].max(), s_wall.max())      # obstacle 1 is out of range

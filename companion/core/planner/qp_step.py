@@ -121,11 +121,6 @@ def _primal_start(ws: QpWorkspace, v_bar: np.ndarray, p_bar: np.ndarray, lam_bar
     return x0
 
 
-def _largest(arrays: tuple[np.ndarray, ...]) -> float:
-    """The largest entry of the non-empty ``arrays`` (0.0 if all are empty)."""
-    return max((float(np.maximum.reduce(a, axis=None)) for a in arrays if a.size), default=0.0)
-
-
 def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data: RequestData, v_bar: np.ndarray,
              p_bar: np.ndarray, lam_bar: np.ndarray | None, budget: WorkBudget, *, first: bool,
              try_hard: bool = True) -> QpStep | None:
@@ -196,7 +191,7 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     x = sol.x
     # cost at the solution with slacks clipped at 0: OSQP meets "s >= 0" only to its
     # tolerance, and a slightly negative slack times the large penalty would bias J
-    xc, xs, s_lo, s_hi, s_wall = read_solution(layout, x)
+    xc, xs, s_lo, s_hi, s_wall, safety_slack = read_solution(layout, x, data.in_range)
     objective = 0.5 * float(xc @ qp.p_times(xc)) + float(data.q @ xc) + data.constant
     penalty = float(ws.template.q_slack @ xs)
     col = layout.col
@@ -206,7 +201,7 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     return QpStep(
         velocities=vel, positions=pos, lam=lam,
         slack_obstacle=s_lo, slack_upper=s_hi, slack_wall=s_wall,
-        safety_slack=_largest((s_lo[data.in_range], s_wall)),
+        safety_slack=safety_slack,
         objective=objective, cost=objective - penalty, rows=rows,
         velocity_lower=v_lo, velocity_upper=v_hi, lam_lower=lam_lo, lam_upper=lam_hi,
         wall_upper=data.wall_upper, v0=data.v0, solution=sol, admm_iterations=admm, least_violation=least,

@@ -111,15 +111,30 @@ def write_rows(layout: QpLayout, rows: ObstacleRows, in_range: np.ndarray, upper
     return v_lo, v_hi
 
 
+def largest_safety_slack(s_lo: np.ndarray, s_wall: np.ndarray, in_range: np.ndarray) -> float:
+    """The largest safety slack: of the in-range obstacles' ``s_lo`` (P, N) and of ``s_wall`` (W, N)
+    (0.0 without such rows). Each block's largest as numpy's ``maximum.reduce`` gives it (NaN
+    propagates; which zero of a tie between +0 and -0 it returns depends on its SIMD lanes),
+    then Python's ``max`` of the two (the first unless the second is larger)."""
+    arrays = (s_lo[in_range], s_wall)
+    return max((float(np.maximum.reduce(a, axis=None)) for a in arrays if a.size), default=0.0)
+
+
 def _read_signature(t):
-    """The solution (n,), the slack columns (intp), the slack scale and block starts; the readings out."""
+    """The solution (n,), the slack columns (intp), the slack scale, block starts, the in-range mask; the readings out."""
     w1, w2, i1 = t.float64[::1], t.float64[:, ::1], t.Array(t.intp, 1, "C", readonly=True)
-    return t.void(jit.readonly(t, 1), i1, t.float64, t.intp, t.intp, t.intp, t.boolean, w1, w1, w2, w2, w2)
+    return t.boolean(jit.readonly(t, 1), i1, t.float64, t.intp, t.intp, t.intp, t.boolean,
+                     t.Array(t.boolean, 1, "C", readonly=True), w1, w1, w2, w2, w2, w1)
 
 
 @jit.lazy(_read_signature)
-def _read_solution(x, slack_cols, scale, s_lo_col, s_hi_col, s_wall_col, has_upper, xc, xs, s_lo, s_hi, s_wall):
-    """:func:`read_solution` in one loop (the same values as the numpy form there)."""
+def _read_solution(x, slack_cols, scale, s_lo_col, s_hi_col, s_wall_col, has_upper, in_range,
+                   xc, xs, s_lo, s_hi, s_wall, largest):
+    """:func:`read_solution` in one loop (the same values as the numpy form there).
+
+    Returns whether ``largest[0]`` is :func:`largest_safety_slack`: not when a block's
+    largest is a zero (its sign is numpy's SIMD lanes' choice), nor when there are none.
+    """
     for k in range(x.shape[0]):
         xc[k] = x[k]
     for k in range(slack_cols.shape[0]):
@@ -128,33 +143,57 @@ def _read_solution(x, slack_cols, scale, s_lo_col, s_hi_col, s_wall_col, has_upp
         xc[slack_cols[k]] = v
         xs[k] = v
     n_steps = s_lo.shape[1]
+    found, nan, top = False, False, 0.0
     for j in range(s_lo.shape[0]):
         for i in range(n_steps):
-            s_lo[j, i] = scale * x[s_lo_col + j * n_steps + i]
+            v = scale * x[s_lo_col + j * n_steps + i]
+            s_lo[j, i] = v
             s_hi[j, i] = scale * x[s_hi_col + j * n_steps + i] if has_upper else 0.0
+            if in_range[j]:
+                if v != v:
+                    nan = True
+                elif not found or v > top:
+                    top = v
+                found = True
+    first, first_found = (math.nan if nan else top), found
+    found, nan, top = False, False, 0.0
     for w in range(s_wall.shape[0]):
         for i in range(n_steps):
-            s_wall[w, i] = scale * x[s_wall_col + w * n_steps + i]
-
-
-def read_solution(layout: QpLayout, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                                             np.ndarray]:
+            v = scale * x[s_wall_col + w * n_steps + i]
+            s_wall[w, i] = v
+            if v != v:
+                nan = True
+            elif not found or v > top:
+                top = v
+            found = True
+    second = math.nan if nan else top
+    if (first_found and first == 0.0) or (found and second == 0.0) or not (first_found or found):
+        return False
+    if first_found and found:
+        largest[0] = second if second > first else first
+    else:
+        largest[0] = first if first_found else second
+    return True
+def read_solution(layout: QpLayout, x: np.ndarray, in_range: np.ndarray) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
     """What the SCP reads from a QP's solution ``x`` (n,).
 
     Returns ``xc``: ``x`` with the slack columns clipped at 0 (``np.maximum(x, 0)``, the cost
-    is evaluated there); ``xs``: ``xc`` at ``layout.slack_cols``; and the slacks in their
-    rows' units (the columns times ``slack_scale``): ``s_lo`` (P, N), ``s_hi`` (P, N, zero
-    without ``c_max`` rows), ``s_wall`` (W, N).
+    is evaluated there); ``xs``: ``xc`` at ``layout.slack_cols``; the slacks in their rows'
+    units (the columns times ``slack_scale``): ``s_lo`` (P, N), ``s_hi`` (P, N, zero without
+    ``c_max`` rows), ``s_wall`` (W, N); and :func:`largest_safety_slack` with ``in_range`` (P,).
     """
     P, N, W, col, sig = layout.P, layout.N, layout.W, layout.col, layout.slack_scale
     if jit.available():
         xc, xs = np.empty(x.shape[0]), np.empty(layout.slack_cols.shape[0])
-        s_lo, s_hi, s_wall = np.empty((P, N)), np.empty((P, N)), np.empty((W, N))
-        _read_solution()(np.ascontiguousarray(x, dtype=float), layout.slack_cols, float(sig), col["s_lo"].start,
-                         col["s_hi"].start, col["s_wall"].start, layout.upper, xc, xs, s_lo, s_hi, s_wall)
-        return xc, xs, s_lo, s_hi, s_wall
+        s_lo, s_hi, s_wall, largest = np.empty((P, N)), np.empty((P, N)), np.empty((W, N)), np.empty(1)
+        exact = _read_solution()(np.ascontiguousarray(x, dtype=float), layout.slack_cols, float(sig),
+                                 col["s_lo"].start, col["s_hi"].start, col["s_wall"].start, layout.upper,
+                                 np.ascontiguousarray(in_range, dtype=bool), xc, xs, s_lo, s_hi, s_wall, largest)
+        slack = float(largest[0]) if exact else largest_safety_slack(s_lo, s_wall, in_range)
+        return xc, xs, s_lo, s_hi, s_wall, slack
     xc = x.copy()
     xc[layout.slack_cols] = np.maximum(xc[layout.slack_cols], 0.0)
     s_hi = sig * x[col["s_hi"].slice].reshape(P, N) if layout.upper else np.zeros((P, N))
     s_lo, s_wall = sig * x[col["s_lo"].slice].reshape(P, N), sig * x[col["s_wall"].slice].reshape(W, N)
-    return xc, xc[layout.slack_cols], s_lo, s_hi, s_wall
+    return xc, xc[layout.slack_cols], s_lo, s_hi, s_wall, largest_safety_slack(s_lo, s_wall, in_range)
