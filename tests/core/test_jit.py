@@ -341,3 +341,38 @@ def test_that_plans_are_the_same_bits_with_and_without_the_compiled_kernels(form
         assert a.status == b.status and a.iterations == b.iterations
         for field in ("velocities", "positions", "commands", "eta", "contour_of_touch"):
             assert np.asarray(getattr(a, field)).tobytes() == np.asarray(getattr(b, field)).tobytes(), field
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1), st.sampled_from([0.0, 0.06, 0.4]))
+def test_that_the_compiled_lag_gives_the_numpy_positions_and_commands(seed, time_constant_s):
+    """The lag's positions (increments, running sum, ``p_0 +``) and commands, unclipped and clipped
+    as np.clip clips (values at the bounds, beyond them, infinite, NaN, signed zeros): the same
+    bytes from the compiled pass and from numpy."""
+    _require_compiled()
+    from companion.core.planner.vehicle_model import LagModel
+    rng = np.random.default_rng(seed)
+    lag = LagModel.from_time_constant(0.3, time_constant_s)
+    n = int(rng.integers(1, 45))
+    limit = rng.choice([0.5, 1.0, 3.0], 3)
+    v = rng.normal(0.0, 2.0, (n, 3))
+    pick = rng.random((n, 3))
+    v[pick < 0.1] = -0.0
+    v[(pick >= 0.1) & (pick < 0.2)] = 0.0
+    v[(pick >= 0.2) & (pick < 0.3)] = np.broadcast_to(limit, (n, 3))[(pick >= 0.2) & (pick < 0.3)]
+    v[(pick >= 0.3) & (pick < 0.33)] = np.inf
+    v[(pick >= 0.33) & (pick < 0.35)] = np.nan
+    v0 = rng.choice([-0.0, 0.0, 1.5, -2.0], 3)
+    p0 = np.where(rng.random(3) < 0.5, rng.choice([-0.0, 0.0], 3), rng.normal(0.0, 10.0, 3))
+    v[0, rng.random(3) < 0.5] = -0.0                # -0 increments: the running sum and p_0 + keep signs
+
+    def figures():
+        with np.errstate(invalid="ignore"):      # 0 * inf in numpy's products: NaN, as compiled
+            return lag.positions(p0, v0, v), lag.commands(v0, v), lag.commands(v0, v, limit)
+
+    compiled = figures()
+    with _numba_unimportable():
+        reference = figures()
+    for a, b in zip(compiled, reference, strict=True):
+        nan = np.isnan(a)        # NaN where numpy has NaN (its sign bit, from inf - inf, is the CPU's choice)
+        assert np.array_equal(nan, np.isnan(b)) and a[~nan].tobytes() == b[~nan].tobytes()

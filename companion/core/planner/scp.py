@@ -314,7 +314,7 @@ class Planner:
                          else "exact recheck violated c_min without slack")
         # the cmd rows hold |u| <= v_max to OSQP's tolerance, which 1/(1 - alpha) amplifies
         # (1.5e-4 m/s over, measured): clip so that no setpoint ever exceeds the bound
-        commands = np.clip(self.lag.commands(data.v0, velocities), -cfg.velocity_max, cfg.velocity_max)
+        commands = self.lag.commands(data.v0, velocities, limit=cfg.velocity_max)
         for a in (velocities, positions, commands):
             a.setflags(write=False)
         plan = Plan(

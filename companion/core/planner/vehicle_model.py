@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg import expm
 
+from companion.core import jit
 from companion.errors import ConfigError
 
 
@@ -52,6 +53,35 @@ def _with_previous(v0: np.ndarray, velocities: np.ndarray) -> tuple[np.ndarray, 
     previous[0] = v0
     previous[1:] = velocities[:-1]
     return velocities, previous
+
+
+def _lag_signature(t):
+    """``p_0`` or ``V_0`` (3,), ``V_1..V_N`` (N, 3), the model's coefficients; (N, 3) out."""
+    r1, r2 = jit.readonly(t, 1), jit.readonly(t, 2)
+    return t.void(r1, r1, r2, t.float64, t.float64, t.float64, t.boolean, r1, t.float64[:, ::1], t.float64[:, ::1])
+
+
+@jit.lazy(_lag_signature)
+def _lag_pass(p0, v0, velocities, b, c, alpha, clip, limit, positions, commands):
+    """:meth:`LagModel.positions` and :meth:`LagModel.commands` (clipped to ``+-limit`` if ``clip``)
+    in one loop, with numpy's operations in its order: the increment ``b V_i + c V_{i-1}``, the
+    running sum from the first step (``cumsum``), then ``p_0 +``; the command
+    ``(V_i - alpha V_{i-1}) / (1 - alpha)``; the clip as ``np.clip`` (NaN kept, else the bound
+    when beyond it)."""
+    keep = 1.0 - alpha
+    for k in range(3):
+        total = 0.0
+        lo, hi = -limit[k], limit[k]
+        for i in range(velocities.shape[0]):
+            v, prev = velocities[i, k], v0[k] if i == 0 else velocities[i - 1, k]
+            step = b * v + c * prev
+            total = step if i == 0 else total + step
+            positions[i, k] = p0[k] + total
+            u = (v - alpha * prev) / keep
+            if clip and u == u:
+                u = u if u > lo else lo
+                u = u if u < hi else hi
+            commands[i, k] = u
 
 
 @dataclass(frozen=True)
@@ -100,13 +130,30 @@ class LagModel:
 
     def positions(self, p0: np.ndarray, v0: np.ndarray, velocities: np.ndarray) -> np.ndarray:
         """Positions ``p_1..p_N`` (N, 3) from ``p_0`` (3,), ``v_0`` (3,) and ``V_1..V_N`` (N, 3)."""
+        if jit.available():
+            return self._compiled(p0, v0, velocities, None)[0]
         velocities, previous = _with_previous(v0, velocities)
         return np.asarray(p0, dtype=float) + np.cumsum(self.b * velocities + self.c * previous, axis=0)
 
-    def commands(self, v0: np.ndarray, velocities: np.ndarray) -> np.ndarray:
-        """Velocity commands ``u_1..u_N`` (N, 3) that make the vehicle reach ``V_1..V_N``."""
+    def commands(self, v0: np.ndarray, velocities: np.ndarray, limit: np.ndarray | None = None) -> np.ndarray:
+        """Velocity commands ``u_1..u_N`` (N, 3) that make the vehicle reach ``V_1..V_N``.
+
+        ``limit`` (3,), m/s: the commands clipped to ``+-limit`` as ``np.clip`` clips them.
+        """
+        if jit.available():
+            return self._compiled(np.zeros(3), v0, velocities, limit)[1]
         velocities, previous = _with_previous(v0, velocities)
-        return (velocities - self.alpha * previous) / (1.0 - self.alpha)
+        commands = (velocities - self.alpha * previous) / (1.0 - self.alpha)
+        return commands if limit is None else np.clip(commands, -limit, limit)
+
+    def _compiled(self, p0, v0, velocities, limit) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`_lag_pass`: positions and commands (N, 3)."""
+        velocities = np.ascontiguousarray(velocities, dtype=float)
+        positions, commands = np.empty(velocities.shape), np.empty(velocities.shape)
+        _lag_pass()(np.ascontiguousarray(p0, dtype=float), np.ascontiguousarray(v0, dtype=float), velocities,
+                    float(self.b), float(self.c), float(self.alpha), limit is not None,
+                    np.ascontiguousarray(np.zeros(3) if limit is None else limit, dtype=float), positions, commands)
+        return positions, commands
 
     def velocity_at(self, v0: np.ndarray, commands: np.ndarray, elapsed_s: float) -> np.ndarray:
         """Vehicle velocity (3,) ``elapsed_s`` seconds after ``v0`` (3,) under ``commands`` (N, 3).
@@ -307,9 +354,10 @@ class ResponseModel:
         """Positions ``p_1..p_N`` (N, 3) from ``p_0``, ``v_0`` and the commands ``V_1..V_N`` (N, 3)."""
         return np.asarray(p0, dtype=float) + self.simulate(v0, velocities)[0]
 
-    def commands(self, v0: np.ndarray, velocities: np.ndarray) -> np.ndarray:
-        """The commands: the planner's variables themselves (N, 3)."""
-        return np.asarray(velocities, dtype=float).copy()
+    def commands(self, v0: np.ndarray, velocities: np.ndarray, limit: np.ndarray | None = None) -> np.ndarray:
+        """The commands: the planner's variables themselves (N, 3), clipped to ``+-limit`` (3,) if given."""
+        commands = np.asarray(velocities, dtype=float).copy()
+        return commands if limit is None else np.clip(commands, -limit, limit)
 
     def velocity_at(self, v0: np.ndarray, commands: np.ndarray, elapsed_s: float) -> np.ndarray:
         """Vehicle velocity (3,) ``elapsed_s`` seconds after the steady state at ``v0`` under ``commands``.
