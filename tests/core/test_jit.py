@@ -376,3 +376,41 @@ def test_that_the_compiled_lag_gives_the_numpy_positions_and_commands(seed, time
     for a, b in zip(compiled, reference, strict=True):
         nan = np.isnan(a)        # NaN where numpy has NaN (its sign bit, from inf - inf, is the CPU's choice)
         assert np.array_equal(nan, np.isnan(b)) and a[~nan].tobytes() == b[~nan].tobytes()
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1))
+def test_that_the_compiled_touch_terms_give_the_numpy_contour_and_overlap(seed):
+    """A plan's contour of touch and overlap from eta (negative, signed zeros, large, infinite; a
+    NaN: the same error): the same bytes with the compiled pass and with numpy."""
+    _require_compiled()
+    from companion.core.planner.safety import SafetyFigures
+    rng = np.random.default_rng(seed)
+    shape = (int(rng.integers(0, 5)), int(rng.integers(1, 41)))
+    eta = rng.normal(0.0, 3.0, shape)
+    pick = rng.random(shape)
+    eta[pick < 0.1], eta[(pick >= 0.1) & (pick < 0.2)] = -0.0, 0.0
+    eta[(pick >= 0.2) & (pick < 0.22)] = np.inf
+    eta[(pick >= 0.22) & (pick < 0.24)] = -np.inf
+    eta[(pick >= 0.24) & (pick < 0.26)] = rng.uniform(30.0, 40.0)
+    if rng.random() < 0.1 and eta.size:
+        eta.flat[rng.integers(eta.size)] = np.nan
+    if rng.random() < 0.3:
+        eta = np.asfortranarray(eta)
+
+    terms = formulations.pair_kernels.touch_terms(eta)
+    if not np.isnan(eta).any():           # the special functions' arguments as numpy forms them
+        m = np.maximum(eta, 0.0)
+        assert terms[0].tobytes() == (0.5 * np.square(m)).tobytes() and terms[1].tobytes() == (-m).tobytes()
+
+    def figures():
+        figs = SafetyFigures(eta=eta, wall_margin=np.zeros((0, shape[1])), distance_margin=eta, lam=eta)
+        try:
+            return figs.contour_of_touch.tobytes(), figs.overlap.tobytes()
+        except InputError as exc:
+            return str(exc)
+
+    compiled = figures()
+    with _numba_unimportable():
+        reference = figures()
+    assert compiled == reference

@@ -349,11 +349,13 @@ class Formulation:
         """
         cached = self._recheck
         if (cached is not None and cached[0] is request and _same_values(cached[1], positions)
-                and np.array_equal(cached[2], in_range)):
+                and (cached[2] is in_range or np.array_equal(cached[2], in_range))):
             return cached[3]
         figs = self._exact(request, positions)
         answer = figs, self._holds(request, positions, figs, in_range)
-        self._recheck = (request, np.array(positions), np.array(in_range), answer)
+        # a read-only mask (the planner's, from its request data) is kept as it is: the same object next time
+        kept = in_range if isinstance(in_range, np.ndarray) and not in_range.flags.writeable else np.array(in_range)
+        self._recheck = (request, np.array(positions), kept, answer)
         return answer
 
     def _holds(self, request: PlanRequest, positions: np.ndarray, figs: SafetyFigures, in_range: np.ndarray) -> bool:

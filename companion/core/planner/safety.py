@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from scipy import special
 
 from companion.core import overlap
 from companion.core.planner import pair_kernels
@@ -48,11 +49,21 @@ class SafetyFigures:
     lam: np.ndarray
 
     @cached_property
+    def _touch_terms(self) -> tuple[np.ndarray, np.ndarray] | None:
+        return pair_kernels.touch_terms(self.eta)
+
+    @cached_property
     def contour_of_touch(self) -> np.ndarray:
+        terms = self._touch_terms
+        if terms is not None:        # confidence_from_radius's operations, the same bits
+            return special.gammainc(1.5, terms[0])
         return np.asarray(overlap.confidence_from_radius(self.eta, 3)).reshape(self.eta.shape)
 
     @cached_property
     def overlap(self) -> np.ndarray:
+        terms = self._touch_terms
+        if terms is not None:        # overlap_from_radius's of max(eta, 0), the same bits
+            return 2.0 * special.ndtr(terms[1])
         return np.asarray(overlap.overlap_from_radius(np.maximum(self.eta, 0.0))).reshape(self.eta.shape)
 
 
