@@ -8,6 +8,8 @@ the planner built them before the template, so a plan cannot move by a bit becau
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -124,6 +126,12 @@ def test_that_the_template_is_read_only_and_each_request_gets_its_own_vectors():
     first = RequestData.build(template, planner.formulation, req)
     second = RequestData.build(template, planner.formulation, request([-1.0, 0.5, 0.0]))
     assert not np.shares_memory(first.q, template.q) and not np.shares_memory(first.l, second.l)
+    for data in (first, RequestData.build(template, planner.formulation, req, y_warm=np.zeros(template.layout.m))):
+        arrays = [f.name for f in dataclasses.fields(data) if isinstance(getattr(data, f.name), np.ndarray)]
+        assert "y_warm" in arrays or data is first
+        for name in arrays:          # every array of the request's constants, a new field too, is read-only
+            assert not getattr(data, name).flags.writeable, name
+    assert not template.q_slack.flags.writeable
     assert first.l[planner.layout((N, 2, 2)).row["accel"].start] != second.l[planner.layout((N, 2, 2)).row["accel"].start]
 
 

@@ -132,8 +132,8 @@ def _solution(rng: np.random.Generator, layout: QpLayout) -> np.ndarray:
 @given(st.integers(0, 2**32 - 1), st.booleans(), st.booleans())
 def test_that_the_compiled_reading_gives_numpys_bytes(seed, upper, paper):
     """The solution with its slacks clipped at 0, the clipped slacks, the slacks per row scaled by
-    the layout's slack scale, and the largest safety slack (NaN, ties of +0 and -0, none at all):
-    the same bytes from the compiled pass and numpy."""
+    the layout's slack scale, the largest safety slack (NaN, ties of +0 and -0, none at all) and the
+    largest velocity change from the iterate: the same bytes from the compiled pass and numpy."""
     _require_compiled()
     rng = np.random.default_rng(seed)
     N, P, W = int(rng.integers(1, 12)), int(rng.integers(0, 5)), int(rng.integers(0, 3))
@@ -144,10 +144,13 @@ def test_that_the_compiled_reading_gives_numpys_bytes(seed, upper, paper):
         x[layout.slack_cols] = rng.choice([0.0, -0.0, -1e-9, -2.0, np.nan], layout.slack_cols.size,
                                           p=[0.3, 0.3, 0.2, 0.15, 0.05])
     in_range = rng.random(P) < 0.7
+    v_bar = x[layout.col["V"].slice].reshape(N, 3) + rng.choice([0.0, -0.0, 1e-3, -2.0], (N, 3))
+    v_bar[rng.random((N, 3)) < 0.02] = np.nan
 
     def read():
-        *arrays, largest = read_solution(layout, x, in_range)
-        return [a.tobytes() for a in arrays] + [np.float64(largest).tobytes()]
+        with np.errstate(invalid="ignore"):         # inf - inf in numpy's velocity change: NaN, as compiled
+            *arrays, largest, moved = read_solution(layout, x, in_range, v_bar)
+        return [a.tobytes() for a in arrays] + [np.float64(largest).tobytes(), np.float64(moved).tobytes()]
 
     compiled = read()
     with _numba_unimportable():
@@ -158,12 +161,13 @@ def test_that_the_compiled_reading_gives_numpys_bytes(seed, upper, paper):
 def test_that_the_reading_clips_only_the_slacks():
     """``xc`` is ``x`` except at the slack columns, which are ``max(x, 0)`` (-0 becomes +0); the
     slacks per row are the columns times the slack scale; ``s_hi`` is zero without c_max rows; the
-    largest safety slack leaves out obstacles out of range."""
+    largest safety slack leaves out obstacles out of range; the velocity change is the largest."""
     layout = QpLayout(3, 2, 1, paper=False, upper=False, step_s=0.3, lag=model_from_config(0.3, 0.0, None),
                       slack_scale=0.5)
     x = np.linspace(-1.0, 1.0, layout.n)
     x[layout.slack_cols[0]] = -0.0
-    xc, xs, s_lo, s_hi, s_wall, largest = read_solution(layout, x, np.array([True, False]))
+    v_bar = x[layout.col["V"].slice].reshape(3, 3) + np.array([[0.0, 0.2, 0.0], [-0.5, 0.0, 0.1], [0.0, 0.0, 0.0]])
+    xc, xs, s_lo, s_hi, s_wall, largest, moved = read_solution(layout, x, np.array([True, False]), v_bar)
     other = np.ones(layout.n, dtype=bool)
     other[layout.slack_cols] = False
     np.testing.assert_array_equal(xc[other], x[other])
@@ -173,3 +177,4 @@ def test_that_the_reading_clips_only_the_slacks():
     np.testing.assert_array_equal(s_wall, 0.5 * x[layout.col["s_wall"].slice].reshape(1, 3))
     assert s_hi.shape == (2, 3) and not s_hi.any()
     assert largest == max(s_lo[0].max(), s_wall.max())      # obstacle 1 is out of range
+    assert moved == 0.5

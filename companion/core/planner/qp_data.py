@@ -124,8 +124,9 @@ class RequestData:
     y_warm: np.ndarray | None
 
     def __post_init__(self) -> None:
-        for value in vars(self).values():
-            if isinstance(value, np.ndarray) and value.flags.writeable:
+        for value in (self.v0, self.p_data, self.q, self.q_hard, self.a_slot, self.l, self.u, self.wall_upper,
+                      self.in_range, self.upper_active, self.y_warm):
+            if value is not None and value.flags.writeable:
                 value.setflags(write=False)
 
     @classmethod

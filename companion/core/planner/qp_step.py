@@ -43,6 +43,7 @@ class QpStep:
     velocities, positions : (N, 3) solution.
     lam : (P, N) overlap parameters (``paper``; else the iterate's minmax ``lam``).
     slack_obstacle, slack_upper, slack_wall : (P, N), (P, N), (W, N) slacks at the solution.
+    moved : the largest change of a velocity from the linearisation point, m/s.
     safety_slack : the largest safety slack (in-range obstacle rows and walls, units of
         the row; 0 without such rows).
     objective : cost at the solution including constants and slack penalties (slacks clipped at 0).
@@ -66,6 +67,7 @@ class QpStep:
     slack_upper: np.ndarray
     slack_wall: np.ndarray
     safety_slack: float
+    moved: float
     objective: float
     cost: float
     rows: ObstacleRows
@@ -191,7 +193,7 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     x = sol.x
     # cost at the solution with slacks clipped at 0: OSQP meets "s >= 0" only to its
     # tolerance, and a slightly negative slack times the large penalty would bias J
-    xc, xs, s_lo, s_hi, s_wall, safety_slack = read_solution(layout, x, data.in_range)
+    xc, xs, s_lo, s_hi, s_wall, safety_slack, moved = read_solution(layout, x, data.in_range, v_bar)
     objective = 0.5 * float(xc @ qp.p_times(xc)) + float(data.q @ xc) + data.constant
     penalty = float(ws.template.q_slack @ xs)
     col = layout.col
@@ -201,7 +203,7 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     return QpStep(
         velocities=vel, positions=pos, lam=lam,
         slack_obstacle=s_lo, slack_upper=s_hi, slack_wall=s_wall,
-        safety_slack=safety_slack,
+        safety_slack=safety_slack, moved=moved,
         objective=objective, cost=objective - penalty, rows=rows,
         velocity_lower=v_lo, velocity_upper=v_hi, lam_lower=lam_lo, lam_upper=lam_hi,
         wall_upper=data.wall_upper, v0=data.v0, solution=sol, admm_iterations=admm, least_violation=least,

@@ -124,19 +124,31 @@ def _read_signature(t):
     """The solution (n,), the slack columns (intp), the slack scale, block starts, the in-range mask; the readings out."""
     w1, w2, i1 = t.float64[::1], t.float64[:, ::1], t.Array(t.intp, 1, "C", readonly=True)
     return t.boolean(jit.readonly(t, 1), i1, t.float64, t.intp, t.intp, t.intp, t.boolean,
-                     t.Array(t.boolean, 1, "C", readonly=True), w1, w1, w2, w2, w2, w1)
+                     t.Array(t.boolean, 1, "C", readonly=True), t.intp, jit.readonly(t, 2),
+                     w1, w1, w2, w2, w2, w1)
 
 
 @jit.lazy(_read_signature)
-def _read_solution(x, slack_cols, scale, s_lo_col, s_hi_col, s_wall_col, has_upper, in_range,
+def _read_solution(x, slack_cols, scale, s_lo_col, s_hi_col, s_wall_col, has_upper, in_range, v_col, v_bar,
                    xc, xs, s_lo, s_hi, s_wall, largest):
     """:func:`read_solution` in one loop (the same values as the numpy form there).
 
-    Returns whether ``largest[0]`` is :func:`largest_safety_slack`: not when a block's
-    largest is a zero (its sign is numpy's SIMD lanes' choice), nor when there are none.
+    Writes ``largest[1]``, the step's largest velocity change (a maximum of absolute
+    values: one value whatever the order, NaN propagated). Returns whether ``largest[0]``
+    is :func:`largest_safety_slack`: not when a block's largest is a zero (its sign is
+    numpy's SIMD lanes' choice), nor when there are none.
     """
     for k in range(x.shape[0]):
         xc[k] = x[k]
+    moved, nan = 0.0, False
+    for i in range(v_bar.shape[0]):
+        for c in range(3):
+            d = abs(x[v_col + 3 * i + c] - v_bar[i, c])
+            if d != d:
+                nan = True
+            elif d > moved:
+                moved = d
+    largest[1] = math.nan if nan else moved
     for k in range(slack_cols.shape[0]):
         v = x[slack_cols[k]]
         v = v if (v > 0.0 or v != v) else 0.0
@@ -174,26 +186,29 @@ def _read_solution(x, slack_cols, scale, s_lo_col, s_hi_col, s_wall_col, has_upp
     else:
         largest[0] = first if first_found else second
     return True
-def read_solution(layout: QpLayout, x: np.ndarray, in_range: np.ndarray) -> tuple[
-        np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-    """What the SCP reads from a QP's solution ``x`` (n,).
+def read_solution(layout: QpLayout, x: np.ndarray, in_range: np.ndarray, v_bar: np.ndarray) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """What the SCP reads from a QP's solution ``x`` (n,), solved around the velocities ``v_bar`` (N, 3).
 
     Returns ``xc``: ``x`` with the slack columns clipped at 0 (``np.maximum(x, 0)``, the cost
     is evaluated there); ``xs``: ``xc`` at ``layout.slack_cols``; the slacks in their rows'
     units (the columns times ``slack_scale``): ``s_lo`` (P, N), ``s_hi`` (P, N, zero without
-    ``c_max`` rows), ``s_wall`` (W, N); and :func:`largest_safety_slack` with ``in_range`` (P,).
+    ``c_max`` rows), ``s_wall`` (W, N); :func:`largest_safety_slack` with ``in_range`` (P,);
+    and the largest change of a velocity from ``v_bar``, m/s (``max |V - v_bar|``).
     """
     P, N, W, col, sig = layout.P, layout.N, layout.W, layout.col, layout.slack_scale
     if jit.available():
         xc, xs = np.empty(x.shape[0]), np.empty(layout.slack_cols.shape[0])
-        s_lo, s_hi, s_wall, largest = np.empty((P, N)), np.empty((P, N)), np.empty((W, N)), np.empty(1)
+        s_lo, s_hi, s_wall, largest = np.empty((P, N)), np.empty((P, N)), np.empty((W, N)), np.empty(2)
         exact = _read_solution()(np.ascontiguousarray(x, dtype=float), layout.slack_cols, float(sig),
                                  col["s_lo"].start, col["s_hi"].start, col["s_wall"].start, layout.upper,
-                                 np.ascontiguousarray(in_range, dtype=bool), xc, xs, s_lo, s_hi, s_wall, largest)
+                                 np.ascontiguousarray(in_range, dtype=bool), col["V"].start,
+                                 np.ascontiguousarray(v_bar, dtype=float), xc, xs, s_lo, s_hi, s_wall, largest)
         slack = float(largest[0]) if exact else largest_safety_slack(s_lo, s_wall, in_range)
-        return xc, xs, s_lo, s_hi, s_wall, slack
+        return xc, xs, s_lo, s_hi, s_wall, slack, float(largest[1])
     xc = x.copy()
     xc[layout.slack_cols] = np.maximum(xc[layout.slack_cols], 0.0)
     s_hi = sig * x[col["s_hi"].slice].reshape(P, N) if layout.upper else np.zeros((P, N))
     s_lo, s_wall = sig * x[col["s_lo"].slice].reshape(P, N), sig * x[col["s_wall"].slice].reshape(W, N)
-    return xc, xc[layout.slack_cols], s_lo, s_hi, s_wall, largest_safety_slack(s_lo, s_wall, in_range)
+    moved = float(np.abs(x[col["V"].slice].reshape(N, 3) - v_bar).max())
+    return xc, xc[layout.slack_cols], s_lo, s_hi, s_wall, largest_safety_slack(s_lo, s_wall, in_range), moved

@@ -122,6 +122,9 @@ class Planner:
                                                          config.drone_radius_m)
         self.lag = model_from_config(config.step_s, config.velocity_time_constant_s, config.vehicle_response)
         self._workspaces: dict[tuple[int, int, int], QpWorkspace] = {}
+        # the forward projection's bounds: speed (m/s) and speed change per step (a_max tau)
+        self._projection_bounds = (np.ascontiguousarray(config.velocity_max, dtype=float),
+                                   np.ascontiguousarray(config.accel_max * config.step_s, dtype=float))
 
     # ------------------------------------------------------------------ public API
     def solve(self, request: PlanRequest, warm_start: Plan | None = None) -> Plan:
@@ -171,7 +174,7 @@ class Planner:
             if not new.solution.accurate:
                 notes.append(f"solver: {new.solution.status} at iteration {iterations}")
             step = new
-            moved = float(np.abs(step.velocities - v_bar).max())
+            moved = step.moved
             v_bar, p_bar = step.velocities, step.positions
             lam_bar = step.lam if form.carries_lam else None
             # convergence on the cost without penalties: slacks at OSQP's tolerance times the
@@ -237,7 +240,8 @@ class Planner:
         cfg = self.config
         N, tau = cfg.horizon_steps, cfg.step_s
         if warm_start is not None and warm_start.velocities.shape == (N, 3):
-            v = np.vstack([warm_start.velocities[1:], warm_start.velocities[-1:]])
+            v = np.empty((N, 3))
+            v[:-1], v[-1] = warm_start.velocities[1:], warm_start.velocities[-1]
         else:
             # straight line to the target at constant speed, with a small bulge to the right of
             # the route (HEAD_ON_BIAS_M): a head-on encounter on the line is symmetric and the
@@ -247,8 +251,7 @@ class Planner:
             v = np.broadcast_to(route / (N * tau), (N, 3)) + _right_bulge_velocities(route, N, tau)
         out = np.array(v, dtype=float)
         v0 = np.ascontiguousarray(v0, dtype=float)
-        vmax, da = np.ascontiguousarray(cfg.velocity_max, dtype=float), np.ascontiguousarray(cfg.accel_max * tau)
-        (_project_forward() if jit.available() else _project_forward.py_func)(out, v0, vmax, da)
+        (_project_forward() if jit.available() else _project_forward.py_func)(out, v0, *self._projection_bounds)
         return out
 
     # ------------------------------------------------------------------ internals
