@@ -10,6 +10,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.core import overlap
 from companion.errors import InputError
@@ -201,3 +203,26 @@ def test_that_a_cold_plan_does_not_depend_on_what_the_planner_solved_before(form
     again = used.solve(req)
     np.testing.assert_array_equal(again.velocities, fresh.velocities)
     assert again.iterations == fresh.iterations
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1))
+def test_that_the_caches_compare_positions_as_array_equal_does(seed):
+    """The separator and recheck caches' test of kept positions: np.array_equal's answer, for equal
+    arrays, a change anywhere (the last entry or another), signed zeros, NaN and other shapes."""
+    from companion.core.planner.formulations import _same_values
+    rng = np.random.default_rng(seed)
+    kept = rng.normal(size=(int(rng.integers(1, 6)), 3))
+    other = kept.copy()
+    kind = int(rng.integers(6))
+    if kind == 1:
+        other[-1, -1] += 1.0
+    elif kind == 2:
+        other[int(rng.integers(len(other))), int(rng.integers(3))] = rng.normal()
+    elif kind == 3:
+        kept[-1, -1], other[-1, -1] = 0.0, -0.0          # equal values
+    elif kind == 4:
+        kept[0, 0] = other[0, 0] = np.nan                  # array_equal: NaN is unequal
+    elif kind == 5:
+        other = rng.normal(size=(len(kept) + 1, 3))
+    assert _same_values(kept, other) == np.array_equal(kept, other)

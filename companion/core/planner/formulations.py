@@ -119,9 +119,15 @@ def _nudge(p_bar: np.ndarray, means: np.ndarray, close: np.ndarray | None = None
 
 
 def _same_values(kept: np.ndarray, positions: np.ndarray) -> bool:
-    """``np.array_equal(kept, positions)`` for float arrays (the same test, without its Python layer)."""
+    """``np.array_equal(kept, positions)`` for float (N, 3) arrays (the same test, without its Python layer).
+
+    A new SCP iterate differs from the kept one in its last position as a rule, so that
+    entry is compared first (a NaN there is unequal either way).
+    """
     positions = np.asarray(positions)
-    return kept.shape == positions.shape and bool((kept == positions).all())
+    if kept.shape != positions.shape or (kept.ndim == 2 and kept.size and kept[-1, -1] != positions[-1, -1]):
+        return False
+    return bool((kept == positions).all())
 
 
 def _iterate_pairs_signature(t):
