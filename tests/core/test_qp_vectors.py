@@ -34,7 +34,8 @@ def _signed(rng: np.random.Generator, shape: tuple[int, ...], scale: float) -> n
 
 
 def _case(rng: np.random.Generator, layout: QpLayout):
-    """Rows, masks, an iterate with ties against the box (signed zeros too) and NaN, the box (NaN too), the trust radius."""
+    """Rows, masks, an iterate with ties against the box (signed zeros too) and NaN, the box (NaN
+    too), the trust radius."""
     P, N = layout.P, layout.N
     rows = ObstacleRows(coef_p=_signed(rng, (P, N, 3), 1.0), lower=_signed(rng, (P, N), 5.0),
                         upper=_signed(rng, (P, N), 5.0))

@@ -140,7 +140,7 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     rows = formulation.rows(data.request, p_bar, lam_bar)
     a_slot, l, u = ws.a_slot, ws.l, ws.u
     # obstacle rows (out of range: inactive; c_max released where masked), the velocity box
-    # (bounds ∩ trust region around the iterate) and the hard QP's slack bounds (below)
+    # (bounds ∩ trust region around the iterate) and the hard QP's slack bounds (why: below)
     v_lo, v_hi = write_rows(layout, rows, data.in_range, data.upper_active, v_bar, cfg.trust_region_mps,
                             ws.template.velocity_low, ws.template.velocity_high, a_slot, l, u)
     lam_lo = lam_hi = np.zeros((P, 0))

@@ -5,14 +5,15 @@ with the rows of obstacles out of sensing range made inactive and the ``c_max`` 
 released where it does not apply), the velocity box (the speed bounds intersected with
 the trust region around the iterate) and the slack bounds of the hard QP (safety slacks
 pinned to 0, the ``c_max`` slack free): :func:`write_rows`. After the solve it reads the
-solution with its slacks clipped at 0 (for the cost) and the slacks per row:
-:func:`read_solution`. In numpy each is about a dozen small operations on arrays of a
-hundred entries, and each of those, timed inside the replans, costs several
-microseconds; with numba each is one loop, otherwise those operations run. Both give
-the same bytes: copies, products, ``+0.0`` and ``+-inf`` for inactive entries, and
-numpy's ``maximum``/``minimum`` (on a tie the second operand, NaN propagated), which
-``tests/core/test_qp_vectors.py`` checks. Units: the rows' own (metres for the
-hyperplane rows), velocities in m/s.
+solution with its slacks clipped at 0 (for the cost), the slacks per row, the largest
+safety slack and the largest velocity change from the iterate: :func:`read_solution`.
+In numpy each is about a dozen small operations on arrays of a hundred entries, and
+each of those, timed inside the replans, costs several microseconds; with numba each is
+one loop, otherwise those operations run. Both give the same bytes: copies, products,
+``+0.0`` and ``+-inf`` for inactive entries, numpy's ``maximum``/``minimum`` (on a tie
+the second operand, NaN propagated), maxima that are one value in any order (or else
+numpy's own reduction), which ``tests/core/test_qp_vectors.py`` checks. Units: the rows'
+own (metres for the hyperplane rows), velocities in m/s.
 """
 
 from __future__ import annotations
@@ -27,8 +28,9 @@ from companion.core.planner.qp_layout import QpLayout
 
 
 def _signature(t):
-    """Rows (P, N, 3), (P, N), (P, N), masks (P,), the iterate (N, 3) and the speed bounds (3,); the QP's vectors out."""
-    r1, r2, r3, b1 = jit.readonly(t, 1), jit.readonly(t, 2), jit.readonly(t, 3), t.Array(t.boolean, 1, "C", readonly=True)
+    """Rows (P, N, 3), (P, N), (P, N), masks (P,), the iterate (N, 3), the speed bounds (3,); the QP's vectors out."""
+    r1, r2, r3 = jit.readonly(t, 1), jit.readonly(t, 2), jit.readonly(t, 3)
+    b1 = t.Array(t.boolean, 1, "C", readonly=True)
     w1, w2, i1 = t.float64[::1], t.float64[:, ::1], t.Array(t.intp, 1, "C", readonly=True)
     return t.void(r3, r2, r2, b1, b1, t.boolean, r2, t.float64, r1, r1, w1, w1, w1,
                   t.intp, t.intp, t.intp, t.intp, t.intp, t.intp, t.intp, i1, w2, w2)
@@ -121,7 +123,7 @@ def largest_safety_slack(s_lo: np.ndarray, s_wall: np.ndarray, in_range: np.ndar
 
 
 def _read_signature(t):
-    """The solution (n,), the slack columns (intp), the slack scale, block starts, the in-range mask; the readings out."""
+    """The solution (n,), slack columns (intp), slack scale, block starts, in-range mask, iterate; readings out."""
     w1, w2, i1 = t.float64[::1], t.float64[:, ::1], t.Array(t.intp, 1, "C", readonly=True)
     return t.boolean(jit.readonly(t, 1), i1, t.float64, t.intp, t.intp, t.intp, t.boolean,
                      t.Array(t.boolean, 1, "C", readonly=True), t.intp, jit.readonly(t, 2),
@@ -186,6 +188,8 @@ def _read_solution(x, slack_cols, scale, s_lo_col, s_hi_col, s_wall_col, has_upp
     else:
         largest[0] = first if first_found else second
     return True
+
+
 def read_solution(layout: QpLayout, x: np.ndarray, in_range: np.ndarray, v_bar: np.ndarray) -> tuple[
         np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]:
     """What the SCP reads from a QP's solution ``x`` (n,), solved around the velocities ``v_bar`` (N, 3).
