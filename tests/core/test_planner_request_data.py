@@ -8,6 +8,7 @@ the planner built them before the template, so a plan cannot move by a bit becau
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 
 import numpy as np
@@ -15,6 +16,7 @@ import pytest
 
 from companion.core.planner import Planner, PlannerConfig, PlanRequest
 from companion.core.planner.qp_data import RequestData, RequestTemplate
+from tests.core.test_jit import _numba_unimportable
 
 N = 12
 PX4_LIKE = {"horizontal": {"p_gain_per_s": 1.5, "i_gain_per_s2": 0.3, "drag_per_s": 0.8, "accel_lag_s": 0.2},
@@ -26,6 +28,7 @@ CONFIGS = {
     "paper, c_max": dict(formulation="paper", c_max=0.99),
     "no progress weight": dict(weight_progress=0.0, c_max=0.99),
     "progress weight": dict(weight_progress=2.0, velocity_time_constant_s=0.3),   # P's stage blocks nonzero
+    "sensing range": dict(sensing_range_m=7.0, c_max=0.99, velocity_time_constant_s=0.3),   # the second obstacle out
 }
 #: current velocities: signed zeros, one clipped axis, small and mixed values
 VELOCITIES = ([0.0, -0.0, 0.0], [-0.0, 0.7, -0.0], [9.0, -2.5, 0.3], [1e-12, -3e-7, 0.2], [-1.3, 1.7, -0.4])
@@ -81,8 +84,9 @@ def whole_vectors(cfg: PlannerConfig, form, layout, request: PlanRequest) -> dic
     tr, tc = layout.p_term_idx
     vel = jerk_scale * layout.p_vel_jerk + 2.0 * wv * layout.p_vel_diag
     p_data = np.concatenate([vel, blocks[:, tr, tc].ravel()])[layout.p_perm]
+    in_range = np.linalg.norm(request.obstacle_means[:, 0, :] - request.position, axis=-1) <= cfg.sensing_range_m
     return dict(v0=v0, p_data=p_data, q=q, q_hard=q_hard,
-                a_slot=a_slot, l=l, u=u,
+                a_slot=a_slot, l=l, u=u, in_range=in_range, upper_active=in_range & request.upper_bound_mask,
                 constant=(wt + wp * N_) * request.target @ m @ request.target + wj / tau**4 * float(np.sum(c * c)))
 
 
@@ -97,7 +101,15 @@ def request(velocity) -> PlanRequest:
 
 
 @pytest.mark.parametrize("name", sorted(CONFIGS))
-def test_that_the_template_gives_the_whole_vectors_bit_for_bit(name):
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_that_the_template_gives_the_whole_vectors_bit_for_bit(name, compiled):
+    """Both forms of build (the compiled pass for a lag model, and numpy's operations without
+    numba or for a response model) give the whole vectors' bytes."""
+    with contextlib.nullcontext() if compiled else _numba_unimportable():
+        _compare_with_whole_vectors(name)
+
+
+def _compare_with_whole_vectors(name):
     cfg = PlannerConfig(horizon_steps=N, step_s=0.3, velocity_max_mps=(3.0, 3.0, 1.0),
                         accel_max_mps2=(2.0, 2.0, 1.0), **CONFIGS[name])
     planner = Planner(cfg)
@@ -135,7 +147,13 @@ def test_that_the_template_is_read_only_and_each_request_gets_its_own_vectors():
     assert first.l[planner.layout((N, 2, 2)).row["accel"].start] != second.l[planner.layout((N, 2, 2)).row["accel"].start]
 
 
-def test_that_random_velocities_give_the_whole_vectors_bit_for_bit():
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_that_random_velocities_give_the_whole_vectors_bit_for_bit(compiled):
+    with contextlib.nullcontext() if compiled else _numba_unimportable():
+        _compare_random_velocities()
+
+
+def _compare_random_velocities():
     # the cost constant adds |V_0|^2 (scaled) to a larger term, which absorbs most rounding
     # differences: many velocities are needed before a different order of the sum shows
     cfg = PlannerConfig(horizon_steps=N, step_s=0.3, velocity_max_mps=(3.0, 3.0, 1.0), accel_max_mps2=(2.0, 2.0, 1.0),

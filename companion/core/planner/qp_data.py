@@ -8,14 +8,17 @@ Cost and row definitions are in :mod:`companion.core.planner.scp` and
 
 from __future__ import annotations
 
-import numpy as np
-
+import math
 from dataclasses import dataclass
 
+import numpy as np
+
+from companion.core import jit
 from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import Formulation
 from companion.core.planner.qp_layout import QpLayout
 from companion.core.planner.request import PlanRequest
+from companion.core.planner.vehicle_model import LagModel
 
 
 class RequestTemplate:
@@ -71,8 +74,12 @@ class RequestTemplate:
         l[layout.row["slack"].slice], u[layout.row["slack"].slice] = 0.0, np.inf
         self.q, self.q_hard, self.l, self.u = q, q_hard, l, u
         self.q_slack = q[layout.slack_cols]       # every request's q there (build writes V and p only)
+        # for RequestData's compiled pass: P's data and where its position blocks go, the jerk column
+        self.p_data_template, self.p_data_size = self._p_data, self._p_data.size
+        self.p_block_entries = tuple(np.array(a, dtype=np.intp) for a in (*layout.p_term_idx, layout.p_block_slots))
+        self.jerk_column = np.ascontiguousarray(self._jerk_column[:, 0])
         for value in (self.v0_low, self.v0_high, self.velocity_low, self.velocity_high, self._p_data,
-                      self._jerk_column, q, q_hard, l, u, self.q_slack):
+                      self._jerk_column, q, q_hard, l, u, self.q_slack, self.jerk_column, *self.p_block_entries):
             value.setflags(write=False)
 
     def p_data(self, terminal: np.ndarray, stage: np.ndarray) -> np.ndarray:
@@ -85,6 +92,89 @@ class RequestTemplate:
     def jerk_q(self, v0: np.ndarray) -> np.ndarray:
         """``D2' c`` (N, 3) for ``c = (V_0, 0, ..., 0)``, as scipy's sparse product sums it (from +0)."""
         return 0.0 + self._jerk_column * v0
+
+
+def _fill_signature(t):
+    """The request's numbers and the template's vectors and indices in; the request's vectors out."""
+    r1, r2, r3 = jit.readonly(t, 1), jit.readonly(t, 2), jit.readonly(t, 3)
+    i1, i2 = t.Array(t.intp, 1, "C", readonly=True), t.Array(t.intp, 2, "C", readonly=True)
+    b1, w1, wb = t.Array(t.boolean, 1, "C", readonly=True), t.float64[::1], t.boolean[::1]
+    f, n, yes = t.float64, t.intp, t.boolean
+    return t.void(r1, r1, r1, r2, r1, f, f, f, f,                  # velocity, clip, m, goal, weights
+                  r1, i1, i1, i2,                                  # P: template data, block entries and slots
+                  f, r1, r1, r1, n, n,                             # q: jerk scale and column, templates, V and p
+                  r1, r2, n, n,                                    # A: constants, wall normals, wall slot, N
+                  r1, r1, f, r1, n, yes, n, yes, f, n,             # l, u: templates, dyn, accel, cmd rows
+                  r3, f, b1,                                       # means, sensing range, c_max mask
+                  w1, w1, w1, w1, w1, w1, w1, wb, wb)              # out: v0, P, q, q_hard, A, l, u, masks
+
+
+@jit.lazy(_fill_signature)
+def _fill(velocity, v0_low, v0_high, m, goal, stage_scale, terminal_scale, progress_q, terminal_q,
+          p_data0, term_r, term_c, block_slots,
+          jerk_scale, jerk_column, q0, q_hard0, v_col, p_col,
+          a_data0, walls_normal, wall_slot, n_steps,
+          l0, u0, lag_c, position, dyn_row, accel, accel_row, cmd, alpha, cmd_row,
+          means, sensing_range, upper_mask,
+          v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active):
+    """:meth:`RequestData.build`'s elementwise work for a :class:`LagModel`, in one pass.
+
+    The operations of the numpy form there, in its order: ``np.clip`` of ``V_0``; ``P``'s
+    position blocks ``stage`` on every step and ``stage + terminal`` on the last
+    (``scale * m``); the jerk term ``jerk_scale (0 + D2[:, 0] V_0)``; ``q_p = (-2 w_p) g``
+    with ``(-2 w_t) g`` added on the last step; the wall normals in ``A``; the dynamics rows
+    ``c V_0 + p_0`` (then zeros), ``V_0`` added to the first acceleration rows and
+    ``alpha V_0`` to the first command rows; the sensing range ``sqrt((dx^2 + dy^2) + dz^2)``.
+    """
+    for k in range(3):
+        x = velocity[k]
+        if x == x:                       # np.clip: NaN kept, else the bound when beyond it
+            x = x if x > v0_low[k] else v0_low[k]
+            x = x if x < v0_high[k] else v0_high[k]
+        v0[k] = x
+    for e in range(p_data0.shape[0]):
+        p_data[e] = p_data0[e]
+    last = block_slots.shape[0] - 1
+    for b in range(block_slots.shape[0]):
+        for e in range(term_r.shape[0]):
+            value = stage_scale * m[term_r[e], term_c[e]]
+            if b == last:
+                value = value + terminal_scale * m[term_r[e], term_c[e]]
+            p_data[block_slots[b, e]] = value
+    for e in range(q0.shape[0]):
+        q[e], q_hard[e] = q0[e], q_hard0[e]
+    for i in range(n_steps):
+        for k in range(3):
+            value = jerk_scale * (0.0 + jerk_column[i] * v0[k])
+            q[v_col + 3 * i + k] = q_hard[v_col + 3 * i + k] = value
+            value = progress_q * goal[k]
+            if i == n_steps - 1:
+                value = value + terminal_q * goal[k]
+            q[p_col + 3 * i + k] = q_hard[p_col + 3 * i + k] = value
+    for e in range(a_data0.shape[0]):
+        a_slot[e] = a_data0[e]
+    for w in range(walls_normal.shape[0]):
+        for i in range(n_steps):
+            for k in range(3):
+                a_slot[wall_slot + 3 * (w * n_steps + i) + k] = walls_normal[w, k]
+    for e in range(l0.shape[0]):
+        l[e], u[e] = l0[e], u0[e]
+    for i in range(n_steps):
+        for k in range(3):
+            value = lag_c * v0[k] + position[k] if i == 0 else 0.0
+            l[dyn_row + 3 * i + k] = u[dyn_row + 3 * i + k] = value
+    for k in range(3):
+        if accel:
+            l[accel_row + k] = l[accel_row + k] + v0[k]
+            u[accel_row + k] = u[accel_row + k] + v0[k]
+        if cmd:
+            shift = alpha * v0[k]
+            l[cmd_row + k] = l[cmd_row + k] + shift
+            u[cmd_row + k] = u[cmd_row + k] + shift
+    for j in range(means.shape[0]):
+        dx, dy, dz = means[j, 0, 0] - position[0], means[j, 0, 1] - position[1], means[j, 0, 2] - position[2]
+        in_range[j] = math.sqrt((dx * dx + dy * dy) + dz * dz) <= sensing_range
+        upper_active[j] = in_range[j] and upper_mask[j]
 
 
 @dataclass(frozen=True)
@@ -134,6 +224,8 @@ class RequestData:
               y_warm: np.ndarray | None = None) -> RequestData:
         """Constants of ``request`` on ``template`` (its configuration and layout; ``y_warm``: shifted duals)."""
         cfg, layout = template.config, template.layout
+        if jit.available() and isinstance(layout.lag, LagModel):
+            return cls._build_compiled(template, formulation, request, y_warm)
         N, tau = layout.N, cfg.step_s
         # V_0 clipped so that |V_1 - V_0| <= a tau and |V_1| <= v_max can hold together
         v0 = np.clip(request.velocity, template.v0_low, template.v0_high)
@@ -186,5 +278,42 @@ class RequestData:
         else:
             in_range = np.zeros(0, dtype=bool)
         upper_active = in_range & request.upper_bound_mask  # obstacles c_max applies to
+        return cls(request=request, v0=v0, p_data=p_data, q=q, q_hard=q_hard, constant=constant, a_slot=a_slot,
+                   l=l, u=u, wall_upper=wall_upper, in_range=in_range, upper_active=upper_active, y_warm=y_warm)
+
+    @classmethod
+    def _build_compiled(cls, template: RequestTemplate, formulation: Formulation, request: PlanRequest,
+                        y_warm: np.ndarray | None) -> RequestData:
+        """:meth:`build` for a lag model with the elementwise work in one compiled pass (:func:`_fill`),
+        the inverse, the matrix products and the walls' spread as numpy computes them: the same bits."""
+        cfg, layout = template.config, template.layout
+        N, tau = layout.N, cfg.step_s
+        m = np.linalg.inv(request.drone_covs[-1])
+        m = 0.5 * (m + m.T)
+        wt, wj, wp = cfg.weight_terminal, cfg.weight_jerk, template.weight_progress
+        goal = m @ request.target
+        P = request.num_obstacles
+        v0, p_data = np.empty(3), np.empty(template.p_data_size)
+        q, q_hard, a_slot = np.empty(layout.n), np.empty(layout.n), np.empty(layout.a_data0.size)
+        l, u = np.empty(layout.m), np.empty(layout.m)
+        in_range, upper_active = np.empty(P, dtype=bool), np.empty(P, dtype=bool)
+        lag = layout.lag
+        _fill()(np.ascontiguousarray(request.velocity, dtype=float), template.v0_low, template.v0_high,
+                np.ascontiguousarray(m), np.ascontiguousarray(goal, dtype=float), 2.0 * wp, 2.0 * wt,
+                -2.0 * wp, -2.0 * wt, template.p_data_template, *template.p_block_entries,
+                template.jerk_scale, template.jerk_column, template.q, template.q_hard,
+                layout.col["V"].start, layout.col["p"].start,
+                layout.a_data0, np.ascontiguousarray(request.walls_normal, dtype=float),
+                layout.slot["wall_p"].start if layout.W else 0, N,
+                template.l, template.u, float(lag.c), np.ascontiguousarray(request.position, dtype=float),
+                layout.row["dyn"].start, bool(lag.bounds_command_steps), layout.row["accel"].start,
+                bool(layout.row["cmd"].size), float(lag.alpha), layout.row["cmd"].start,
+                np.ascontiguousarray(request.obstacle_means, dtype=float), float(cfg.sensing_range_m),
+                np.ascontiguousarray(request.upper_bound_mask, dtype=bool),
+                v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active)
+        v0_sq = float(v0[0] * v0[0] + v0[1] * v0[1]) + float(v0[2] * v0[2])
+        constant = (wt + wp * N) * request.target @ m @ request.target + wj / tau**4 * v0_sq
+        wall_upper = formulation.wall_upper(request)
+        u[layout.row["wall"].slice] = wall_upper.ravel()
         return cls(request=request, v0=v0, p_data=p_data, q=q, q_hard=q_hard, constant=constant, a_slot=a_slot,
                    l=l, u=u, wall_upper=wall_upper, in_range=in_range, upper_active=upper_active, y_warm=y_warm)
