@@ -58,8 +58,8 @@ def test_that_plans_are_the_same_bits_through_the_extension_and_through_osqps_wr
 
 @pytest.mark.parametrize("direct", [True, False])
 def test_that_a_solution_is_the_callers_own(direct):
-    """A solution's ``x`` and ``y`` are copies: the next update and solve, and writing into them, leave
-    the solver's next answer and the earlier solution alone (the extension hands back new arrays)."""
+    """A solution's ``x`` and ``y`` are the caller's own: writing into them leaves the solver's next
+    answer alone, and later solves leave them alone (the extension hands back new arrays)."""
     cfg, req = scenario_one()
     with pytest.MonkeyPatch.context() as mp:
         if not direct:
@@ -69,7 +69,7 @@ def test_that_a_solution_is_the_callers_own(direct):
         qp = planner.solver((req.horizon_steps, req.num_obstacles, req.num_walls))
         first = qp.solve()
         kept_x, kept_y = first.x.copy(), first.y.copy()
-        first.x[:], first.y[:] = np.nan, np.nan            # the caller's arrays: its to write
+        first.x[:], first.y[:] = np.nan, np.nan            # the caller may write into them
         again = qp.solve()
         assert np.isfinite(again.x).all() and np.isfinite(again.y).all()
         first.x[:], first.y[:] = kept_x, kept_y

@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from companion.core import overlap
 from companion.errors import InputError
 from companion.core.planner import Plan, Planner, PlannerConfig, PlanRequest
+from companion.core.planner.formulations import _same_values
 
 S = 0.02 * np.eye(3)
 START = np.array([0.0, 0.0, -5.0])
@@ -210,7 +211,6 @@ def test_that_a_cold_plan_does_not_depend_on_what_the_planner_solved_before(form
 def test_that_the_caches_compare_positions_as_array_equal_does(seed):
     """The separator and recheck caches' test of kept positions: np.array_equal's answer, for equal
     arrays, a change anywhere (the last entry or another), signed zeros, NaN and other shapes."""
-    from companion.core.planner.formulations import _same_values
     rng = np.random.default_rng(seed)
     kept = rng.normal(size=(int(rng.integers(1, 6)), 3))
     other = kept.copy()
