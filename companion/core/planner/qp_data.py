@@ -53,8 +53,8 @@ class RequestTemplate:
         self.weight_progress = cfg.weight_progress / N
         self.jerk_scale = 2.0 * cfg.weight_jerk / tau**4
         self._p_data = layout.p_data(self.jerk_scale, 2.0 * cfg.weight_velocity, np.zeros((3, 3)))
-        # D2' c with c = (V_0, 0, ..., 0) touches only D2's first column
-        self._jerk_column = layout.d2_t[:, [0]].toarray()
+        # D2' c with c = (V_0, 0, ..., 0) touches only D2's first column, (N,)
+        self.jerk_column = np.ascontiguousarray(layout.d2_t[:, [0]].toarray()[:, 0])
         q = np.zeros(layout.n)
         for name in ("s_lo", "e_pos", "e_neg", "s_wall"):
             q[layout.col[name].slice] = cfg.slack_penalty * layout.slack_scale   # variable = slack / slack_scale
@@ -74,12 +74,10 @@ class RequestTemplate:
         l[layout.row["slack"].slice], u[layout.row["slack"].slice] = 0.0, np.inf
         self.q, self.q_hard, self.l, self.u = q, q_hard, l, u
         self.q_slack = q[layout.slack_cols]       # every request's q there (build writes V and p only)
-        # for RequestData's compiled pass: P's data and where its position blocks go, the jerk column
-        self.p_data_template, self.p_data_size = self._p_data, self._p_data.size
+        # for RequestData's compiled pass: where P's position blocks go (the layout's indices as intp)
         self.p_block_entries = tuple(np.array(a, dtype=np.intp) for a in (*layout.p_term_idx, layout.p_block_slots))
-        self.jerk_column = np.ascontiguousarray(self._jerk_column[:, 0])
         for value in (self.v0_low, self.v0_high, self.velocity_low, self.velocity_high, self._p_data,
-                      self._jerk_column, q, q_hard, l, u, self.q_slack, self.jerk_column, *self.p_block_entries):
+                      self.jerk_column, q, q_hard, l, u, self.q_slack, *self.p_block_entries):
             value.setflags(write=False)
 
     def p_data(self, terminal: np.ndarray, stage: np.ndarray) -> np.ndarray:
@@ -91,7 +89,7 @@ class RequestTemplate:
 
     def jerk_q(self, v0: np.ndarray) -> np.ndarray:
         """``D2' c`` (N, 3) for ``c = (V_0, 0, ..., 0)``, as scipy's sparse product sums it (from +0)."""
-        return 0.0 + self._jerk_column * v0
+        return 0.0 + self.jerk_column[:, None] * v0
 
 
 def _fill_signature(t):
@@ -222,98 +220,102 @@ class RequestData:
     @classmethod
     def build(cls, template: RequestTemplate, formulation: Formulation, request: PlanRequest,
               y_warm: np.ndarray | None = None) -> RequestData:
-        """Constants of ``request`` on ``template`` (its configuration and layout; ``y_warm``: shifted duals)."""
+        """Constants of ``request`` on ``template`` (its configuration and layout; ``y_warm``: shifted duals).
+
+        The inverse, the matrix products and the walls' spread are numpy's (LAPACK, BLAS and
+        ``einsum`` fix their bits); the elementwise rest is one compiled pass for a lag model
+        (:func:`_elementwise_compiled`) and numpy's operations otherwise
+        (:func:`_elementwise_numpy`), the same bits.
+        """
         cfg, layout = template.config, template.layout
-        if jit.available() and isinstance(layout.lag, LagModel):
-            return cls._build_compiled(template, formulation, request, y_warm)
         N, tau = layout.N, cfg.step_s
-        # V_0 clipped so that |V_1 - V_0| <= a tau and |V_1| <= v_max can hold together
-        v0 = np.clip(request.velocity, template.v0_low, template.v0_high)
         # terminal: w_t (p_N - g)' M (p_N - g), M = S_N^-1  ->  P += 2 w_t M, q += -2 w_t M g
         m = np.linalg.inv(request.drone_covs[-1])
         m = 0.5 * (m + m.T)
         wt, wj, wp = cfg.weight_terminal, cfg.weight_jerk, template.weight_progress
-        # progress: (w_p / N) sum_i (p_i - g)' M (p_i - g): without it the plan only has to be
-        # at the target at step N, so each replan arrives "N steps from now" and the drone
-        # closes in asymptotically
-        p_data = template.p_data(2.0 * wt * m, 2.0 * wp * m)
-        q, q_hard = template.q.copy(), template.q_hard.copy()
-        # jerk: |D2 V + c|^2 / tau^4 per axis with c_0 = V_0, the rest 0  ->  q += 2 w_j/tau^4 D2' c
-        q_v = template.jerk_scale * template.jerk_q(v0)
         goal = m @ request.target
-        q_p = np.empty((N, 3))
-        q_p[:] = -2.0 * wp * goal
-        q_p[-1] += -2.0 * wt * goal
-        for vec in (q, q_hard):        # the two differ in the slack penalties only (in the template)
-            vec[layout.col["V"].slice] = q_v.ravel()
-            vec[layout.col["p"].slice] = q_p.ravel()
+        compiled = jit.available() and isinstance(layout.lag, LagModel)
+        fill = _elementwise_compiled if compiled else _elementwise_numpy
+        v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active = fill(template, request, m, goal)
         # |c|^2 = |V_0|^2, summed as numpy sums c * c
         v0_sq = float(v0[0] * v0[0] + v0[1] * v0[1]) + float(v0[2] * v0[2])
         constant = (wt + wp * N) * request.target @ m @ request.target + wj / tau**4 * v0_sq
-        # A: constants plus wall normals (fixed for this request)
-        a_slot = layout.a_data0.copy()
-        if layout.W:
-            a_slot[layout.slot["wall_p"].slice].reshape(layout.W, N, 3)[:] = request.walls_normal[:, None, :]
-        # bounds: the template's, with V_0, p_0 and the walls of this request
-        l, u = template.l.copy(), template.u.copy()
-        dyn = layout.lag.free_increments(v0, N)           # p_1 - b V_1 = p_0 + c V_0 for the lag
-        dyn[0] += request.position
-        l[layout.row["dyn"].slice] = u[layout.row["dyn"].slice] = dyn.ravel()
-        if layout.lag.bounds_command_steps:       # else a response model: the autopilot limits acceleration
-            first = slice(layout.row["accel"].start, layout.row["accel"].start + 3)
-            l[first] += v0
-            u[first] += v0
-        if layout.row["cmd"].size:          # commands within the speed bound: (1 - a) |u_i| <= (1 - a) v_max
-            first = slice(layout.row["cmd"].start, layout.row["cmd"].start + 3)
-            l[first] += layout.lag.alpha * v0
-            u[first] += layout.lag.alpha * v0
         # walls: a.p_i - s <= b - r sqrt(a' S_i a) - R_drone
         wall_upper = formulation.wall_upper(request)
         u[layout.row["wall"].slice] = wall_upper.ravel()
-        # sensing range: distance from the drone now to each obstacle's first predicted mean
-        if request.num_obstacles:
-            d = request.obstacle_means[:, 0, :] - request.position
-            dist = np.sqrt(np.add.reduce(d * d, axis=-1))     # numpy's norm over the last axis, without its checks
-            in_range = dist <= cfg.sensing_range_m
-        else:
-            in_range = np.zeros(0, dtype=bool)
-        upper_active = in_range & request.upper_bound_mask  # obstacles c_max applies to
         return cls(request=request, v0=v0, p_data=p_data, q=q, q_hard=q_hard, constant=constant, a_slot=a_slot,
                    l=l, u=u, wall_upper=wall_upper, in_range=in_range, upper_active=upper_active, y_warm=y_warm)
 
-    @classmethod
-    def _build_compiled(cls, template: RequestTemplate, formulation: Formulation, request: PlanRequest,
-                        y_warm: np.ndarray | None) -> RequestData:
-        """:meth:`build` for a lag model with the elementwise work in one compiled pass (:func:`_fill`),
-        the inverse, the matrix products and the walls' spread as numpy computes them: the same bits."""
-        cfg, layout = template.config, template.layout
-        N, tau = layout.N, cfg.step_s
-        m = np.linalg.inv(request.drone_covs[-1])
-        m = 0.5 * (m + m.T)
-        wt, wj, wp = cfg.weight_terminal, cfg.weight_jerk, template.weight_progress
-        goal = m @ request.target
-        P = request.num_obstacles
-        v0, p_data = np.empty(3), np.empty(template.p_data_size)
-        q, q_hard, a_slot = np.empty(layout.n), np.empty(layout.n), np.empty(layout.a_data0.size)
-        l, u = np.empty(layout.m), np.empty(layout.m)
-        in_range, upper_active = np.empty(P, dtype=bool), np.empty(P, dtype=bool)
-        lag = layout.lag
-        _fill()(np.ascontiguousarray(request.velocity, dtype=float), template.v0_low, template.v0_high,
-                np.ascontiguousarray(m), np.ascontiguousarray(goal, dtype=float), 2.0 * wp, 2.0 * wt,
-                -2.0 * wp, -2.0 * wt, template.p_data_template, *template.p_block_entries,
-                template.jerk_scale, template.jerk_column, template.q, template.q_hard,
-                layout.col["V"].start, layout.col["p"].start,
-                layout.a_data0, np.ascontiguousarray(request.walls_normal, dtype=float),
-                layout.slot["wall_p"].start if layout.W else 0, N,
-                template.l, template.u, float(lag.c), np.ascontiguousarray(request.position, dtype=float),
-                layout.row["dyn"].start, bool(lag.bounds_command_steps), layout.row["accel"].start,
-                bool(layout.row["cmd"].size), float(lag.alpha), layout.row["cmd"].start,
-                np.ascontiguousarray(request.obstacle_means, dtype=float), float(cfg.sensing_range_m),
-                np.ascontiguousarray(request.upper_bound_mask, dtype=bool),
-                v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active)
-        v0_sq = float(v0[0] * v0[0] + v0[1] * v0[1]) + float(v0[2] * v0[2])
-        constant = (wt + wp * N) * request.target @ m @ request.target + wj / tau**4 * v0_sq
-        wall_upper = formulation.wall_upper(request)
-        u[layout.row["wall"].slice] = wall_upper.ravel()
-        return cls(request=request, v0=v0, p_data=p_data, q=q, q_hard=q_hard, constant=constant, a_slot=a_slot,
-                   l=l, u=u, wall_upper=wall_upper, in_range=in_range, upper_active=upper_active, y_warm=y_warm)
+
+def _elementwise_numpy(template: RequestTemplate, request: PlanRequest, m: np.ndarray, goal: np.ndarray) -> tuple:
+    """``(v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active)`` of :meth:`RequestData.build`
+    with numpy's operations (``m``: the symmetrised inverse of the terminal covariance, ``goal``:
+    ``m`` times the target; the rows of the walls' upper side are left for build)."""
+    cfg, layout = template.config, template.layout
+    N = layout.N
+    wt, wp = cfg.weight_terminal, template.weight_progress
+    # V_0 clipped so that |V_1 - V_0| <= a tau and |V_1| <= v_max can hold together
+    v0 = np.clip(request.velocity, template.v0_low, template.v0_high)
+    # progress: (w_p / N) sum_i (p_i - g)' M (p_i - g): without it the plan only has to be
+    # at the target at step N, so each replan arrives "N steps from now" and the drone
+    # closes in asymptotically
+    p_data = template.p_data(2.0 * wt * m, 2.0 * wp * m)
+    q, q_hard = template.q.copy(), template.q_hard.copy()
+    # jerk: |D2 V + c|^2 / tau^4 per axis with c_0 = V_0, the rest 0  ->  q += 2 w_j/tau^4 D2' c
+    q_v = template.jerk_scale * template.jerk_q(v0)
+    q_p = np.empty((N, 3))
+    q_p[:] = -2.0 * wp * goal
+    q_p[-1] += -2.0 * wt * goal
+    for vec in (q, q_hard):        # the two differ in the slack penalties only (in the template)
+        vec[layout.col["V"].slice] = q_v.ravel()
+        vec[layout.col["p"].slice] = q_p.ravel()
+    # A: constants plus wall normals (fixed for this request)
+    a_slot = layout.a_data0.copy()
+    if layout.W:
+        a_slot[layout.slot["wall_p"].slice].reshape(layout.W, N, 3)[:] = request.walls_normal[:, None, :]
+    # bounds: the template's, with V_0 and p_0 of this request (the walls' are written by build)
+    l, u = template.l.copy(), template.u.copy()
+    dyn = layout.lag.free_increments(v0, N)           # p_1 - b V_1 = p_0 + c V_0 for the lag
+    dyn[0] += request.position
+    l[layout.row["dyn"].slice] = u[layout.row["dyn"].slice] = dyn.ravel()
+    if layout.lag.bounds_command_steps:       # else a response model: the autopilot limits acceleration
+        first = slice(layout.row["accel"].start, layout.row["accel"].start + 3)
+        l[first] += v0
+        u[first] += v0
+    if layout.row["cmd"].size:          # commands within the speed bound: (1 - a) |u_i| <= (1 - a) v_max
+        first = slice(layout.row["cmd"].start, layout.row["cmd"].start + 3)
+        l[first] += layout.lag.alpha * v0
+        u[first] += layout.lag.alpha * v0
+    # sensing range: distance from the drone now to each obstacle's first predicted mean
+    if request.num_obstacles:
+        d = request.obstacle_means[:, 0, :] - request.position
+        dist = np.sqrt(np.add.reduce(d * d, axis=-1))     # numpy's norm over the last axis, without its checks
+        in_range = dist <= cfg.sensing_range_m
+    else:
+        in_range = np.zeros(0, dtype=bool)
+    upper_active = in_range & request.upper_bound_mask  # obstacles c_max applies to
+    return v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active
+
+
+def _elementwise_compiled(template: RequestTemplate, request: PlanRequest, m: np.ndarray, goal: np.ndarray) -> tuple:
+    """:func:`_elementwise_numpy` for a lag model, in one compiled pass (:func:`_fill`)."""
+    cfg, layout, lag = template.config, template.layout, template.layout.lag
+    wt, wp = cfg.weight_terminal, template.weight_progress
+    v0, p_data = np.empty(3), np.empty(template._p_data.size)
+    q, q_hard, a_slot = np.empty(layout.n), np.empty(layout.n), np.empty(layout.a_data0.size)
+    l, u = np.empty(layout.m), np.empty(layout.m)
+    in_range, upper_active = np.empty(request.num_obstacles, dtype=bool), np.empty(request.num_obstacles, dtype=bool)
+    _fill()(np.ascontiguousarray(request.velocity, dtype=float), template.v0_low, template.v0_high,
+            np.ascontiguousarray(m), np.ascontiguousarray(goal, dtype=float), 2.0 * wp, 2.0 * wt,
+            -2.0 * wp, -2.0 * wt, template._p_data, *template.p_block_entries,
+            template.jerk_scale, template.jerk_column, template.q, template.q_hard,
+            layout.col["V"].start, layout.col["p"].start,
+            layout.a_data0, np.ascontiguousarray(request.walls_normal, dtype=float),
+            layout.slot["wall_p"].start if layout.W else 0, layout.N,
+            template.l, template.u, float(lag.c), np.ascontiguousarray(request.position, dtype=float),
+            layout.row["dyn"].start, bool(lag.bounds_command_steps), layout.row["accel"].start,
+            bool(layout.row["cmd"].size), float(lag.alpha), layout.row["cmd"].start,
+            np.ascontiguousarray(request.obstacle_means, dtype=float), float(cfg.sensing_range_m),
+            np.ascontiguousarray(request.upper_bound_mask, dtype=bool),
+            v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active)
+    return v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active
