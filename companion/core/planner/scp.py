@@ -249,7 +249,7 @@ class Planner:
             # deterministically, as the rules of the air do (pass right).
             route = request.target - request.position
             v = np.broadcast_to(route / (N * tau), (N, 3)) + _right_bulge_velocities(route, N, tau)
-        out = np.array(v, dtype=float)
+        out = np.ascontiguousarray(v, dtype=float)    # both branches made a new array: projected in place
         v0 = np.ascontiguousarray(v0, dtype=float)
         (_project_forward() if jit.available() else _project_forward.py_func)(out, v0, *self._projection_bounds)
         return out
