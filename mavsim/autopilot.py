@@ -69,13 +69,17 @@ class Autopilot:
         self._default_us = {STREAM_IDS[n]: (round(1e6 / r) if r > 0 else None) for n, r in rates.items()}
         self.interval_us = {link: dict(self._default_us) for link in links}
         self.next_due = {link: {i: 0 for i in self._default_us} for link in links}
+        self._earliest_due_us = 0    # no stream is due before this (us); lowered by SET_MESSAGE_INTERVAL
         self.stats: Counter[str] = Counter()
         self._last_reject: dict[str, int] = {}
 
     # ------------------------------------------------------------------ streams
     def streams_due(self, now_us: int, veh: VehicleState, estimate) -> list[tuple[str, object]]:
         """Telemetry due at ``now_us`` as (link, message); ``estimate()`` gives (pos, vel)."""
+        if now_us < self._earliest_due_us:     # most physics steps: nothing due
+            return []
         out = []
+        earliest = math.inf
         for msg_id in self._default_us:
             links = []
             for link, due in self.next_due.items():
@@ -85,10 +89,13 @@ class Autopilot:
                     due[msg_id] += iv
                     if due[msg_id] <= now_us:  # fell behind (e.g. a long step): no burst
                         due[msg_id] = now_us + iv
+                if iv is not None:
+                    earliest = min(earliest, due[msg_id])
             if links:
                 pos, vel = estimate()
                 msg = self.tm.build(msg_id, now_us, self.cmdr, veh, pos, vel)
                 out.extend((link, msg) for link in links)
+        self._earliest_due_us = earliest
         return out
 
     # ------------------------------------------------------------------ incoming
@@ -175,6 +182,7 @@ class Autopilot:
                 new = None if iv == -1 else (self._default_us[msg_id] if iv == 0 else max(iv, 1000))
                 self.interval_us[link][msg_id] = new
                 self.next_due[link][msg_id] = now_us
+                self._earliest_due_us = min(self._earliest_due_us, now_us)
                 result = mavlink2.MAV_RESULT_ACCEPTED
         elif command == 510:  # GET_MESSAGE_INTERVAL
             msg_id = _finite_int(p[0])

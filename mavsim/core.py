@@ -157,7 +157,8 @@ class Simulator:
         return self._est
 
     def _obstacle_positions(self, now_us: int) -> np.ndarray:
-        return np.array([o.track.state(now_us * 1e-6)[0] for o in self.obstacles]).reshape(-1, 3)
+        t_s = now_us * 1e-6
+        return np.array([o.track.position(t_s) for o in self.obstacles]).reshape(-1, 3)
 
     def _encode(self, link: str, sysid: int, compid: int, msg) -> bytes:
         key = (link, sysid, compid)

@@ -84,6 +84,13 @@ class ObstacleTrack:
             self.speed = ob.speed_mps
             self.loop = ob.loop
 
+    def position(self, t_s: float) -> np.ndarray:
+        """True position at ``t_s`` (NED, m): :meth:`state`'s first part, without the velocity
+        (the truth recorder asks at every physics step)."""
+        if self.const_v is not None:
+            return self.start + self.const_v * max(0.0, t_s - self.delay)
+        return self.state(t_s)[0]
+
     def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """True (position, velocity) at ``t_s``."""
         tau = max(0.0, t_s - self.delay)
@@ -171,6 +178,8 @@ class ObstacleSystem:
 
     def due(self, now_us: int) -> list[tuple[str, object]]:
         """(route, message) pairs due at ``now_us`` (call once per step, in time order)."""
+        if now_us < self.next_heartbeat_us and now_us < self.next_report_us:    # most physics steps
+            return []
         out: list[tuple[str, object]] = []
         own = OWN_OBSTACLE_LINK if self.transport == "link" else OWN_API_LINK
         if now_us >= self.next_heartbeat_us:

@@ -286,13 +286,16 @@ class Commander:
         return v
 
     def _setpoint_parts(self, sp: OffboardSetpoint) -> tuple:
-        """Which fields of ``sp`` apply and their values with the ignored ones zeroed, worked out once per
-        setpoint (setpoints arrive at about 20 Hz, the physics steps at 100 Hz)."""
+        """Which fields of ``sp`` apply, their values with the ignored ones zeroed, and whether only its
+        velocity applies, worked out once per setpoint (setpoints arrive at about 20 Hz, the physics
+        steps at 100 Hz)."""
         if self._parts_of is not sp:
             pos_ok, vel_ok, acc_ok = (np.isfinite(sp.position_ned_m), np.isfinite(sp.velocity_ned_mps),
                                       np.isfinite(sp.accel_ned_mps2))
+            velocity_only = bool(vel_ok.all() and not pos_ok.any() and not acc_ok.any())
             self._parts = (pos_ok, vel_ok, acc_ok, np.where(pos_ok, sp.position_ned_m, 0.0),
-                           np.where(vel_ok, sp.velocity_ned_mps, 0.0), np.where(acc_ok, sp.accel_ned_mps2, 0.0))
+                           np.where(vel_ok, sp.velocity_ned_mps, 0.0), np.where(acc_ok, sp.accel_ned_mps2, 0.0),
+                           velocity_only)
             self._parts_of = sp
         return self._parts
 
@@ -300,10 +303,14 @@ class Commander:
         sp = self.setpoint
         assert sp is not None
         p = vehicle.position_ned_m
-        pos_ok, vel_ok, acc_ok, pos_sp, vel_ff, acc_sp = self._setpoint_parts(sp)
-        self._acc_integrator = np.where(acc_ok, self._acc_integrator + acc_sp * dt, vehicle.velocity_ned_mps)
-        v = np.where(pos_ok, POS_GAIN_PER_S * (pos_sp - p) + vel_ff,
-                     np.where(vel_ok, vel_ff, np.where(acc_ok, self._acc_integrator, 0.0)))
+        pos_ok, vel_ok, acc_ok, pos_sp, vel_ff, acc_sp, velocity_only = self._setpoint_parts(sp)
+        if velocity_only:    # what the general case below gives for it (the companion's setpoints)
+            self._acc_integrator = vehicle.velocity_ned_mps.copy()
+            v = vel_ff.copy()
+        else:
+            self._acc_integrator = np.where(acc_ok, self._acc_integrator + acc_sp * dt, vehicle.velocity_ned_mps)
+            v = np.where(pos_ok, POS_GAIN_PER_S * (pos_sp - p) + vel_ff,
+                         np.where(vel_ok, vel_ff, np.where(acc_ok, self._acc_integrator, 0.0)))
         yaw = sp.yaw_rad if math.isfinite(sp.yaw_rad) else None
         rate = sp.yaw_rate_radps if math.isfinite(sp.yaw_rate_radps) else None
         return v, yaw, rate

@@ -81,8 +81,9 @@ class TruthRecorder:
             diff = obstacle_pos - p
             d = np.sqrt(np.einsum("ij,ij->i", diff, diff))
             closer = d < self.min_dist
-            self.min_dist = np.where(closer, d, self.min_dist)
-            self.min_dist_t = np.where(closer, t_s, self.min_dist_t)
+            if closer.any():
+                self.min_dist = np.where(closer, d, self.min_dist)
+                self.min_dist_t = np.where(closer, t_s, self.min_dist_t)
             self._contacts("obstacle", self.names, d, d < self.radius_sum, t_s)
         if len(self.static_rs):
             d = np.linalg.norm(self.static_c - p, axis=1)
@@ -101,7 +102,7 @@ class TruthRecorder:
                 logger.info("t=%.2f goal reached", t_s)
 
     def _contacts(self, kind: str, names: list[str], dist: np.ndarray, hit: np.ndarray, t_s: float) -> None:
-        if not self._open and not hit.any():
+        if not self._open and not hit.any():    # no contact open, none now (nearly every step)
             return
         for i in np.flatnonzero(hit):
             key = (kind, names[i])

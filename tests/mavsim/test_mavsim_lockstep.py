@@ -175,6 +175,49 @@ def test_that_set_message_interval_changes_the_rate():
     assert not of_type(c.run(1.0), "LOCAL_POSITION_NED")
 
 
+def test_that_a_stream_switched_back_on_restarts_at_once_even_after_all_were_off():
+    # the autopilot skips its streams until the earliest is due: switching every stream off makes
+    # that "never", and switching one back on must bring it forward to now
+    from mavsim.telemetry import STREAM_IDS
+
+    c = Client(AIRBORNE)
+    for msg_id in STREAM_IDS.values():
+        c.command(511, msg_id, -1, run_s=0.0)
+    c.run(0.5)
+    assert not [m for m in c.run(1.0) if m.get_srcSystem() == 1 and m.get_type() != "COMMAND_ACK"]
+    c.command(511, 32, 0, run_s=0.0)     # LOCAL_POSITION_NED back to its default rate
+    msgs = c.run(1.0)
+    lpn = of_type(msgs, "LOCAL_POSITION_NED")
+    assert lpn and lpn[0].time_boot_ms <= round(1e3 * (c.sim.time_s - 1.0)) + 10
+    assert len(lpn) == pytest.approx(30, abs=1)
+    # a slower rate then a faster one: the faster applies from the step it was asked at
+    c.command(511, 32, 2_000_000, run_s=0.0)
+    c.run(0.3)
+    c.command(511, 32, 100_000, run_s=0.0)
+    assert len(of_type(c.run(1.0), "LOCAL_POSITION_NED")) == pytest.approx(10, abs=1)
+
+
+def test_that_the_velocity_only_setpoint_shortcut_flies_as_the_general_path(monkeypatch):
+    from mavsim.px4 import Commander
+
+    def fly() -> tuple[bytes, bytes]:
+        c = Client(AIRBORNE)
+        c.run(0.5, vel_sp(0.0))
+        c.set_mode_offboard(vel_sp(0.0))
+        for vx, vy, vz in ((1.5, -0.7, 0.2), (-0.3, 2.0, -0.4), (0.0, -0.0, 0.1)):
+            c.run(0.7, vel_sp(vx, vy, vz))
+        truth = c.sim.truth
+        return truth.drone_position_ned_m.tobytes(), truth.drone_velocity_ned_mps.tobytes()
+
+    parts = Commander._setpoint_parts
+    taken = []
+    monkeypatch.setattr(Commander, "_setpoint_parts", lambda self, sp: taken.append(parts(self, sp)[-1]) or parts(self, sp))
+    shortcut = fly()
+    assert taken and all(taken)      # every setpoint of that flight took the shortcut
+    monkeypatch.setattr(Commander, "_setpoint_parts", lambda self, sp: parts(self, sp)[:-1] + (False,))
+    assert fly() == shortcut         # the general np.where path: the same bits
+
+
 def test_that_params_list_read_and_set_are_consistent():
     c = Client(AIRBORNE)
     c.send(mavlink2.MAVLink_param_request_list_message(1, 1))
@@ -350,3 +393,31 @@ def test_that_an_airborne_disarmed_spawn_is_held_until_armed_with_a_stream():
     msgs = c.run(2.0, vel_sp(1.0))
     assert acks(msgs, 400)[0].result == 0 and c.sim.truth.drone_velocity_ned_mps[0] > 0.9
     assert c.sim.truth.drone_position_ned_m[2] == pytest.approx(-5.0, abs=0.01)
+
+
+@pytest.mark.parametrize("motion", [
+    {"velocity_ned_mps": np.array([0.7, -1.3, 0.05]), "waypoints_ned_m": None, "loop": False},
+    {"velocity_ned_mps": None, "waypoints_ned_m": np.array([[10.0, 0.0, -5.0], [10.0, 8.0, -4.0]]), "loop": False},
+    {"velocity_ned_mps": None, "waypoints_ned_m": np.array([[10.0, 0.0, -5.0], [10.0, 8.0, -4.0]]), "loop": True},
+])
+def test_that_an_obstacle_position_is_the_first_part_of_its_state(motion):
+    # the truth recorder asks for the position alone at every physics step: the same bits
+    from mavsim.obstacles import ObstacleTrack
+    from mavsim.scenario import Obstacle
+
+    ob = Obstacle(name="o", radius_m=0.5, start_ned_m=np.array([1.0, 2.0, -5.0]), speed_mps=1.7,
+                  measurement_cov_m2=0.01 * np.eye(3), velocity_cov_m2ps2=None, report_rate_hz=10.0,
+                  start_delay_s=1.25, **motion)
+    track = ObstacleTrack(ob)
+    for t_s in (0.0, 1.0, 1.25, 1.26, 3.3, 7.77, 12.5, 40.0):
+        assert track.position(t_s).tobytes() == track.state(t_s)[0].tobytes(), t_s
+
+
+def test_that_the_lag_profile_carries_one_read_only_zero_controller_state():
+    from mavsim.vehicle import ZERO_CONTROLLER, VehicleCommand, VehicleParams, initial_state, step
+
+    state = step(initial_state(np.array([0.0, 0.0, -5.0])), VehicleCommand(np.array([1.0, 0.0, 0.0])), 0.01,
+                 VehicleParams())
+    assert state.controller is ZERO_CONTROLLER
+    with pytest.raises(ValueError):
+        state.controller.integral_mps2[0] = 1.0
