@@ -20,6 +20,7 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from estimator.covariance import symmetrise
+from estimator.linalg import inverse
 from estimator.models import STATE_DIM, process_noise, propagate, propagate_position, transition_matrix
 from estimator.results import GaussianState, Reason, UpdateResult
 from estimator.measurement import Measurement
@@ -60,6 +61,7 @@ class ConstantVelocityFilter:
         self._gate = gate_thresholds
         self._label = label
         self._kf = KalmanFilter(dim_x=STATE_DIM, dim_z=3)
+        self._kf.inv = inverse    # filterpy's S^-1: np.linalg.inv's bits without its Python layer
         self._kf.x = np.zeros(STATE_DIM)
         self._fq: tuple[float, np.ndarray | None, np.ndarray | None] = (math.nan, None, None)
         self.t_s: float | None = None

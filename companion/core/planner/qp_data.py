@@ -19,6 +19,7 @@ from companion.core.planner.formulations import Formulation
 from companion.core.planner.qp_layout import QpLayout
 from companion.core.planner.request import PlanRequest
 from companion.core.planner.vehicle_model import LagModel
+from estimator.linalg import inverse
 
 
 class RequestTemplate:
@@ -222,15 +223,15 @@ class RequestData:
               y_warm: np.ndarray | None = None) -> RequestData:
         """Constants of ``request`` on ``template`` (its configuration and layout; ``y_warm``: shifted duals).
 
-        The inverse, the matrix products and the walls' spread are numpy's (LAPACK, BLAS and
-        ``einsum`` fix their bits); the elementwise rest is one compiled pass for a lag model
+        The inverse (numpy's LAPACK call, through :func:`estimator.linalg.inverse`), the matrix
+        products and the walls' spread are numpy's (LAPACK, BLAS and ``einsum`` fix their bits); the elementwise rest is one compiled pass for a lag model
         (:func:`_elementwise_compiled`) and numpy's operations otherwise
         (:func:`_elementwise_numpy`), the same bits.
         """
         cfg, layout = template.config, template.layout
         N, tau = layout.N, cfg.step_s
         # terminal: w_t (p_N - g)' M (p_N - g), M = S_N^-1  ->  P += 2 w_t M, q += -2 w_t M g
-        m = np.linalg.inv(request.drone_covs[-1])
+        m = inverse(request.drone_covs[-1])    # np.linalg.inv's bits without its Python layer
         m = 0.5 * (m + m.T)
         wt, wj, wp = cfg.weight_terminal, cfg.weight_jerk, template.weight_progress
         goal = m @ request.target
