@@ -146,10 +146,12 @@ def _problem_3x3(c: list[list[float]], rtol: float) -> str | None:
     closed form (each must be positive, as LAPACK's factorisation requires).
     """
     (a, b, c_), (d, e, f), (g, h, i) = c
-    values = (a, b, c_, d, e, f, g, h, i)
-    if not all(math.isfinite(x) for x in values):
+    # a sum of finite entries is finite unless it overflows; only then (or with an infinite or
+    # NaN entry) are they looked at one by one
+    if (not math.isfinite(a + b + c_ + d + e + f + g + h + i)
+            and not all(math.isfinite(x) for x in (a, b, c_, d, e, f, g, h, i))):
         return "covariance has non-finite entries"
-    scale = max(max(abs(x) for x in values), _TINY)
+    scale = max(abs(a), abs(b), abs(c_), abs(d), abs(e), abs(f), abs(g), abs(h), abs(i), _TINY)
     if max(abs(b - d), abs(c_ - g), abs(f - h)) > rtol * scale:
         return "covariance is not symmetric"
     # Cholesky of the lower triangle (LAPACK reads one triangle): pivots l11^2, l22^2, l33^2

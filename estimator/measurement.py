@@ -132,7 +132,8 @@ def _noise(cov: np.ndarray | None, std: float, name: str) -> np.ndarray:
             )
         return np.diag(var)
     if c.shape == (3, 3):
-        if all(math.isnan(x) for row in c.tolist() for x in row):
+        rows = c.tolist()
+        if math.isnan(rows[0][0]) and all(math.isnan(x) for row in rows for x in row):    # all NaN: unknown
             return default_var * np.eye(3)
         problem = covariance_problem(c)
         if problem is not None:
