@@ -50,6 +50,8 @@ def test_that_a_triangle_of_the_wrong_length_is_an_input_error():
     ("cov", "message"),
     [
         (np.diag([1.0, np.inf, 1.0]), "non-finite"),
+        (np.diag([1.0, np.nan, 1.0]), "non-finite"),
+        (np.array([[1.0, 0.0, np.inf], [0.0, 1.0, 0.0], [-np.inf, 0.0, 1.0]]), "non-finite"),   # inf - inf in a sum
         (np.array([[1.0, 0.5, 0], [0.4, 1.0, 0], [0, 0, 1.0]]), "not symmetric"),
         (np.diag([1.0, -1.0, 1.0]), "not positive definite"),
         (np.zeros((3, 3)), "not positive definite"),
@@ -62,6 +64,12 @@ def test_that_covariance_problem_names_what_is_wrong(cov, message):
 
 def test_that_a_valid_covariance_has_no_problem():
     assert covariance_problem(np.array([[2.0, 0.3, 0], [0.3, 1.0, 0.1], [0, 0.1, 0.5]])) is None
+
+
+def test_that_finite_entries_whose_sum_overflows_are_finite():
+    # the 3x3 check takes the entries' sum as its finiteness test and looks one by one when it overflows
+    assert covariance_problem(np.diag([1e308, 1e308, 1e308])) is None
+    assert "not positive definite" in covariance_problem(np.diag([1e308, 1e308, -1e308]))
 
 
 @settings(max_examples=300, deadline=None)
