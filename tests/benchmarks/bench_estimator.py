@@ -85,13 +85,15 @@ def _filterpy_loop_predict_s() -> float:
 def _filterpy_update_s() -> float:
     """Median time of filterpy's own ``predict`` + ``update`` per report, on the cycle's reports.
 
-    A bare filterpy filter per track with ``F``, ``Q``, ``R`` and ``H`` set once: no report
-    checks, no time keeping, no gate, no symmetrisation. The floor of a track update while
-    filterpy is the filter of record: ten of them and the horizon prediction are the least a
-    10-track cycle costs.
+    A bare filterpy filter per track with ``F``, ``Q``, ``R`` and ``H`` set once, and the
+    inverse the tracker gives filterpy (:func:`estimator.linalg.inverse`): no report checks,
+    no time keeping, no gate, no symmetrisation. The floor of a track update while filterpy
+    is the filter of record: ten of them and the horizon prediction are the least a 10-track
+    cycle costs.
     """
     from filterpy.kalman import KalmanFilter
 
+    from estimator.linalg import inverse
     from estimator.measurement import H_POSITION
 
     reports = _reports()
@@ -102,6 +104,7 @@ def _filterpy_update_s() -> float:
         kf = KalmanFilter(dim_x=6, dim_z=3)
         kf.x, kf.P = np.concatenate([start[i], np.zeros(3)]), np.eye(6)
         kf.F, kf.Q, kf.R = transition_matrix(REPORT_DT_S), process_noise(REPORT_DT_S, q), REPORT_COV
+        kf.inv = inverse
         filters.append(kf)
     times = []
     for c, _, z in reports:
