@@ -5,7 +5,7 @@ the planner the drone's terminal covariance (3x3) once per replan. ``np.linalg.i
 most of its time on a 3x3 in Python: argument checks, type resolution and an ``errstate``
 context around the one call that does the work, ``numpy.linalg._umath_linalg.inv`` (LAPACK's
 ``dgesv`` against the identity). Timed with ``timeit`` on a 3x3: 5.2 us against 1.6 us for
-the call alone; inside the tracker's cycle, 11 us a track update (docs/PERFORMANCE.md).
+the call alone; inside the tracker's cycle, about 10 us a track update (docs/PERFORMANCE.md).
 
 :func:`inverse` makes that call directly, so its result is ``np.linalg.inv``'s to the bit
 (the call is the same; tests/estimator/test_estimator_linalg.py compares them). What the
@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-try:  # numpy's own gufunc behind np.linalg.inv (private, present from numpy 1.8 to 2.x)
+try:  # the gufunc np.linalg.inv calls (private: numpy.linalg's own import)
     from numpy.linalg import _umath_linalg
 except ImportError:  # pragma: no cover - a numpy that moved it: the public call, same results
     _umath_linalg = None

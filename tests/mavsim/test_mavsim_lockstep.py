@@ -211,7 +211,13 @@ def test_that_the_velocity_only_setpoint_shortcut_flies_as_the_general_path(monk
 
     parts = Commander._setpoint_parts
     taken = []
-    monkeypatch.setattr(Commander, "_setpoint_parts", lambda self, sp: taken.append(parts(self, sp)[-1]) or parts(self, sp))
+
+    def recorded(self, sp):
+        out = parts(self, sp)
+        taken.append(out[-1])
+        return out
+
+    monkeypatch.setattr(Commander, "_setpoint_parts", recorded)
     shortcut = fly()
     assert taken and all(taken)      # every setpoint of that flight took the shortcut
     monkeypatch.setattr(Commander, "_setpoint_parts", lambda self, sp: parts(self, sp)[:-1] + (False,))

@@ -224,7 +224,8 @@ class RequestData:
         """Constants of ``request`` on ``template`` (its configuration and layout; ``y_warm``: shifted duals).
 
         The inverse (numpy's LAPACK call, through :func:`estimator.linalg.inverse`), the matrix
-        products and the walls' spread are numpy's (LAPACK, BLAS and ``einsum`` fix their bits); the elementwise rest is one compiled pass for a lag model
+        products and the walls' spread are numpy's (LAPACK, BLAS and ``einsum`` fix their
+        bits); the elementwise rest is one compiled pass for a lag model
         (:func:`_elementwise_compiled`) and numpy's operations otherwise
         (:func:`_elementwise_numpy`), the same bits.
         """
