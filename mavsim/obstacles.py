@@ -96,7 +96,7 @@ class ObstacleTrack:
         tau = max(0.0, t_s - self.delay)
         moving = t_s > self.delay
         if self.const_v is not None:
-            return self.start + self.const_v * tau, (self.const_v.copy() if moving else np.zeros(3))
+            return self.position(t_s), (self.const_v.copy() if moving else np.zeros(3))
         total = self.cum[-1]
         if total <= 0.0:
             return self.start.copy(), np.zeros(3)

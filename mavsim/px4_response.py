@@ -94,7 +94,18 @@ class ControllerState:
 
     @classmethod
     def zero(cls) -> ControllerState:
-        return cls(np.zeros(3), np.zeros(3))
+        """The state at rest: one shared instance with read-only arrays (the lag profile's
+        vehicle state carries it at every physics step; nothing writes into a state)."""
+        return _ZERO
+
+
+def _read_only_zeros() -> np.ndarray:
+    z = np.zeros(3)
+    z.flags.writeable = False
+    return z
+
+
+_ZERO = ControllerState(_read_only_zeros(), _read_only_zeros())
 
 
 def _clamp(a_sp: np.ndarray, r: Px4Response) -> tuple[np.ndarray, np.ndarray]:

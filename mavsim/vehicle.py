@@ -61,17 +61,6 @@ class VehicleParams:
     px4: Px4Response = Px4Response()
 
 
-def _read_only_zeros() -> np.ndarray:
-    z = np.zeros(3)
-    z.flags.writeable = False
-    return z
-
-
-#: The PX4 profile's state at rest (the lag profile's always): one shared, read-only instance
-#: instead of a new pair of arrays at every physics step.
-ZERO_CONTROLLER = ControllerState(_read_only_zeros(), _read_only_zeros())
-
-
 @dataclass(frozen=True)
 class VehicleState:
     """True kinematic state.
@@ -94,7 +83,7 @@ class VehicleState:
     yaw_rad: float
     yaw_rate_radps: float
     on_ground: bool
-    controller: ControllerState = ZERO_CONTROLLER
+    controller: ControllerState = ControllerState.zero()
 
     @property
     def roll_pitch_rad(self) -> tuple[float, float]:
@@ -168,7 +157,7 @@ def step(state: VehicleState, command: VehicleCommand, dt: float, params: Vehicl
             rate = 0.0
         z3 = np.zeros(3)
         return VehicleState(p, z3, z3, yaw, rate, True)
-    controller = ZERO_CONTROLLER
+    controller = ControllerState.zero()
     if command.motors_on and params.profile == "px4":
         controller, v_new = controller_step(state.controller, v, state.accel_ned_mps2, v_cmd, dt, params.px4)
         dv = v_new - v
@@ -189,7 +178,7 @@ def step(state: VehicleState, command: VehicleCommand, dt: float, params: Vehicl
         on_ground = True
     yaw, rate = _yaw_step(state.yaw_rad, command, dt) if command.motors_on else (state.yaw_rad, 0.0)
     if on_ground:
-        controller = ZERO_CONTROLLER
+        controller = ControllerState.zero()
     return VehicleState(p_new, v_new, dv / dt, yaw, rate, on_ground, controller)
 
 

@@ -420,10 +420,11 @@ def test_that_an_obstacle_position_is_the_first_part_of_its_state(motion):
 
 
 def test_that_the_lag_profile_carries_one_read_only_zero_controller_state():
-    from mavsim.vehicle import ZERO_CONTROLLER, VehicleCommand, VehicleParams, initial_state, step
+    from mavsim.px4_response import ControllerState
+    from mavsim.vehicle import VehicleCommand, VehicleParams, initial_state, step
 
     state = step(initial_state(np.array([0.0, 0.0, -5.0])), VehicleCommand(np.array([1.0, 0.0, 0.0])), 0.01,
                  VehicleParams())
-    assert state.controller is ZERO_CONTROLLER
+    assert state.controller is ControllerState.zero()
     with pytest.raises(ValueError):
         state.controller.integral_mps2[0] = 1.0
