@@ -44,6 +44,13 @@ class ConstantVelocityFilter:
         NIS threshold per measurement dimension (3, 6); ``None`` disables gating.
     label : str
         Name used in log messages (``"drone"``, ``"track (101, 1)"``).
+    adopt_reports : bool
+        Reports are estimates already filtered upstream (an autopilot's EKF): each one
+        in time order is taken as the state, mean and covariance, instead of being
+        fused with the prediction (Reason ``ADOPTED``). Between reports the filter
+        predicts as usual. Fusing such reports as independent measurements makes the
+        mean an average over their correlated errors that lags the autopilot's
+        corrections (measured against PX4 SITL: up to 0.76 m off PX4's own estimate).
     """
 
     def __init__(
@@ -54,12 +61,14 @@ class ConstantVelocityFilter:
         reinit_gap_s: float,
         gate_thresholds: dict[int, float] | None = None,
         label: str = "filter",
+        adopt_reports: bool = False,
     ) -> None:
         self._q = accel_noise_psd_m2ps3
         self._v0_var = initial_velocity_std_mps**2
         self._reinit_gap_s = reinit_gap_s
         self._gate = gate_thresholds
         self._label = label
+        self._adopt = adopt_reports
         self._kf = KalmanFilter(dim_x=STATE_DIM, dim_z=3)
         self._kf.inv = inverse    # filterpy's S^-1: np.linalg.inv's bits without its Python layer
         self._kf.x = np.zeros(STATE_DIM)
@@ -105,6 +114,9 @@ class ConstantVelocityFilter:
             logger.info("%s: %.3f s since last accepted measurement, re-initialising", self._label, dt)
             self._initialise(t_s, m)
             return UpdateResult(True, Reason.REINITIALISED, t_s)
+        if self._adopt:
+            self._initialise(t_s, m)
+            return UpdateResult(True, Reason.ADOPTED, t_s)
 
         kf = self._kf
         x0, P0 = kf.x, kf.P  # filterpy replaces x and P with new arrays: these stay the estimate at self.t_s

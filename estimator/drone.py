@@ -46,6 +46,7 @@ class DroneFilter:
             reinit_gap_s=config.reinit_gap_s,
             gate_thresholds=None,  # the autopilot's own estimate is not gated: no lock-out
             label="drone",
+            adopt_reports=config.reports == "estimate",
         )
         self._counts: Counter[str] = Counter()
 

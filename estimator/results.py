@@ -32,9 +32,11 @@ class Reason(StrEnum):
     """Rejected: a reported covariance (or variance) was not finite, symmetric, positive definite."""
     GATED = "gated"
     """Rejected: normalised innovation squared above the chi-square gate."""
+    ADOPTED = "adopted"
+    """Accepted: the report is an estimate already filtered upstream (the autopilot's), taken as the state."""
 
 
-ACCEPTED_REASONS = frozenset({Reason.UPDATED, Reason.INITIALISED, Reason.REINITIALISED})
+ACCEPTED_REASONS = frozenset({Reason.UPDATED, Reason.INITIALISED, Reason.REINITIALISED, Reason.ADOPTED})
 
 
 @dataclass(frozen=True, eq=False)  # arrays: no element-wise == (compare .mean/.cov explicitly)
@@ -125,11 +127,12 @@ class FilterStats:
     invalid_shape: int = 0
     invalid_covariance: int = 0
     gated: int = 0
+    adopted: int = 0
 
     @property
     def accepted(self) -> int:
         """Measurements that changed an estimate."""
-        return self.updated + self.initialised + self.reinitialised
+        return self.updated + self.initialised + self.reinitialised + self.adopted
 
     @property
     def rejected(self) -> int:

@@ -120,3 +120,32 @@ def test_that_covariance_stays_symmetric_positive_definite_for_any_valid_reports
         assert_spd(f.state.cov)
     for cov in f.predict_position_covariances(t, np.zeros((10, 3)), 0.3):
         np.linalg.cholesky(cov)
+
+
+def test_that_an_autopilot_estimate_is_adopted_report_by_report_not_filtered_again():
+    # reports = "estimate": each in-order report is the state (mean and covariance); the
+    # default re-filters it, and a position report that jumps against its velocity (an EKF
+    # correction) moves the filtered mean only part of the way
+    jump = ([0.5, -0.3, 0.2], [1.0, 0.0, 0.0], [0.04, 0.04, 0.09], [0.01, 0.01, 0.01])
+    adopted, filtered = started(reports="estimate"), started()
+    for f in (adopted, filtered):
+        f.update(1.1, *jump)
+    np.testing.assert_array_equal(adopted.state.mean, [0.5, -0.3, 0.2, 1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(np.diag(adopted.state.cov), [0.04, 0.04, 0.09, 0.01, 0.01, 0.01])
+    assert adopted.stats.adopted == 1 and adopted.stats.updated == 0 and adopted.stats.accepted == 2
+    assert np.abs(filtered.state.position - [0.5, -0.3, 0.2]).max() > 0.1 and filtered.stats.updated == 1
+    # time order still holds: an older or repeated report is rejected, the state kept
+    assert adopted.update(1.05, [9.0, 9.0, 9.0], [0.0, 0.0, 0.0], None, None).reason == Reason.OUT_OF_ORDER
+    assert adopted.update(1.1, [9.0, 9.0, 9.0], [0.0, 0.0, 0.0], None, None).reason == Reason.DUPLICATE
+    np.testing.assert_array_equal(adopted.state.position, [0.5, -0.3, 0.2])
+    # and it predicts between reports like the filter (the covariance grows with the lag)
+    covs = adopted.predict_position_covariances(1.4, np.zeros((2, 3)), 0.3)
+    assert covs[1][0, 0] > covs[0][0, 0] > 0.04
+
+
+@pytest.mark.parametrize("value", ["filter", "", 1])
+def test_that_an_unknown_kind_of_drone_report_is_refused_naming_the_field(value):
+    from estimator import EstimatorConfigError
+
+    with pytest.raises(EstimatorConfigError, match="reports must be one of"):
+        DroneFilterConfig(reports=value)
