@@ -82,6 +82,8 @@ class Observations:
     texts: list[tuple[float, str]] = field(default_factory=list)
     obstacles: list[tuple[float, np.ndarray]] = field(default_factory=list)       # (t, (P, 3) true positions)
     estimate: list[tuple[float, np.ndarray]] = field(default_factory=list)       # (t, PX4's LOCAL_POSITION_NED)
+    truth_stamp_s: list[float] = field(default_factory=list)     # HIL_STATE_QUATERNION.time_usec of each truth sample
+    estimate_stamp_s: list[float] = field(default_factory=list)  # LOCAL_POSITION_NED.time_boot_ms of each estimate
     offboard_t: float | None = None
 
 
@@ -172,6 +174,7 @@ class World(threading.Thread):
             self._px4_boot = (now, int(msg.time_boot_ms))
             if kind == "LOCAL_POSITION_NED":
                 self.obs.estimate.append((now, np.array([msg.x, msg.y, msg.z])))
+                self.obs.estimate_stamp_s.append(msg.time_boot_ms * 1e-3)
 
     def _on_truth(self, now: float, msg) -> None:
         lat, lon, alt = msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3
@@ -181,3 +184,4 @@ class World(threading.Thread):
         north = math.radians(lat - lat0) * EARTH_RADIUS_M
         east = math.radians(lon - lon0) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
         self.obs.truth.append((now, np.array([north, east, -(alt - alt0)])))
+        self.obs.truth_stamp_s.append(msg.time_usec * 1e-6)
