@@ -7,6 +7,7 @@ Imports nothing from ``companion`` or ``mavsim``.
 """
 
 from estimator.config import DroneFilterConfig, TrackerConfig
+from estimator.drift import PositionDrift
 from estimator.drone import DroneFilter
 from estimator.errors import (
     EstimatorConfigError,
@@ -23,6 +24,7 @@ __all__ = [
     "DroneFilterConfig",
     "ObstacleTracker",
     "TrackerConfig",
+    "PositionDrift",
     "GaussianState",
     "UpdateResult",
     "Reason",

@@ -243,6 +243,13 @@ class Companion:
         if seq.engaged and self.loop.setpoint_kind == "position_velocity" and self.state.mode is LoopMode.TRACKING:
             t_v = self.perception.vehicle_time(t_s)
             reference = self.executor.reference(t_v) if t_v is not None else None
+        if seq.engaged and self.perception.drift is not None:
+            # the plan is in the estimate's position rate: the autopilot's velocity loop gets
+            # the plan's velocity less the estimate's drift (see LoopConfig.drift_window_s)
+            drift = self.perception.drift_mps()
+            command = command - drift
+            if reference is not None:
+                reference = (reference[0], reference[1] - drift)
         if reference is not None:
             out.append(messages.position_velocity_setpoint(t_boot_ms, *reference, **target))
         else:
@@ -334,6 +341,10 @@ class Companion:
         said: Outbox = []
         lead = self.plan_lead_s()
         velocity = self.perception.drone.state.velocity
+        if self.perception.drift is not None:   # the estimate's position rate, which the plans are in
+            drift = self.perception.drift_mps()
+            velocity = velocity + drift
+            self.state.drift_max_mps = [max(a, abs(float(b))) for a, b in zip(self.state.drift_max_mps, drift)]
         if self.loop.initial_velocity == "plan":
             v0 = self.executor.initial_velocity(velocity, t_v + lead)
         elif lead > 0.0:   # anchored on the estimate, changed as the plan in force changes it over the lead

@@ -158,6 +158,12 @@ class LoopConfig:
         arrival delays (:meth:`companion.loop.app.Companion.plan_lead_s`).
     timesync_hz : rate of the TIMESYNC requests that measure the autopilot's clock, Hz, in [0, 50];
         0 maps it from pose arrival times only (:mod:`companion.loop.vehicle_clock`).
+    drift_window_s : window over which the autopilot's position estimate is compared with its
+        own velocity (:class:`estimator.drift.PositionDrift`), s, in [0, 10]; 0 (default) off.
+        When on, the planner plans in the estimate's position rate: ``V_0`` is the velocity
+        estimate plus the drift, and each streamed velocity is the plan's minus the drift,
+        so that the estimate moves as planned (offset-free tracking of an EKF that corrects
+        its position without its velocity; measured on PX4 SITL up to 0.5 m/s, docs/PX4.md).
     setpoint_kind : ``"velocity"`` (default) streams the plan's velocity commands;
         ``"position_velocity"`` streams the plan's position with its velocity as feed-forward
         while tracking a plan (PX4's position loop removes the slow tail of its velocity response).
@@ -176,6 +182,7 @@ class LoopConfig:
     setpoint_kind: str = "velocity"
     timesync_hz: float = 2.0
     plan_lead_max_s: float = 0.25
+    drift_window_s: float = 0.0
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -189,6 +196,7 @@ class LoopConfig:
         set_("max_plan_age_s", check.number("max_plan_age_s", self.max_plan_age_s, positive=True, hi=10.0))
         set_("plan_lead_max_s", check.number("plan_lead_max_s", self.plan_lead_max_s, lo=0.0, hi=1.0))
         set_("timesync_hz", check.number("timesync_hz", self.timesync_hz, lo=0.0, hi=50.0))
+        set_("drift_window_s", check.number("drift_window_s", self.drift_window_s, lo=0.0, hi=10.0))
         set_("max_constrained_tracks", check.integer("max_constrained_tracks", self.max_constrained_tracks, lo=1, hi=64))
 
 

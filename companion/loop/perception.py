@@ -17,7 +17,7 @@ import numpy as np
 from companion.loop.config import CompanionScenario
 from companion.loop.vehicle_clock import VehicleClock
 from companion.mavlink.messages import Key, PoseObservation
-from estimator import DroneFilter, ObstacleTracker
+from estimator import DroneFilter, ObstacleTracker, PositionDrift, Reason
 
 logger = logging.getLogger(__name__)
 
@@ -43,6 +43,9 @@ class Perception:
 
     def __init__(self, scenario: CompanionScenario) -> None:
         self.drone = DroneFilter(scenario.drone_filter)
+        window = scenario.loop.drift_window_s
+        #: The drift of the autopilot's position estimate against its velocity, when asked for.
+        self.drift = PositionDrift(window) if window > 0.0 else None
         self.tracker = ObstacleTracker(scenario.tracker)
         #: Link time onto the autopilot's clock (pose arrivals, TIMESYNC answers).
         self.clock = VehicleClock()
@@ -68,6 +71,11 @@ class Perception:
             result = self.drone.update(obs.t_s, obs.position_ned, obs.velocity_ned, obs.position_var, obs.velocity_var)
             if not result.accepted:
                 return PoseOutcome.DRONE_REJECTED
+            if self.drift is not None:
+                if result.reason in (Reason.INITIALISED, Reason.REINITIALISED):
+                    self.drift.clear()       # a new estimate after a gap: no rate across it
+                if obs.velocity_ned is not None:
+                    self.drift.add(obs.t_s, obs.position_ned, obs.velocity_ned)
             self.clock.observe_pose(t_rx, obs.t_s)
             if obs.position_cov is not None:
                 self.reported_cov = obs.position_cov
@@ -79,6 +87,11 @@ class Perception:
             return PoseOutcome.IGNORED
         result = self.tracker.update(obs.key, obs.t_s, obs.position_ned, obs.velocity_ned, obs.position_cov, obs.velocity_cov)
         return PoseOutcome.OBSTACLE if result.accepted else PoseOutcome.OBSTACLE_REJECTED
+
+    def drift_mps(self) -> np.ndarray:
+        """How fast the autopilot's position estimate moves against its velocity estimate (m/s NED;
+        zeros when ``[companion] drift_window_s`` is 0)."""
+        return np.zeros(3) if self.drift is None else self.drift.value()
 
     def vehicle_time(self, t_s: float) -> float | None:
         """Vehicle time (s since its boot) corresponding to link time ``t_s``; None before any pose."""

@@ -147,6 +147,9 @@ class CompanionState:
     #: smallest realised contour of touch over every replan request (also those whose plan
     #: never came back or was superseded in real time); None until an obstacle was in range
     min_realised_contour: float | None = None
+    #: largest drift of the autopilot's position estimate against its velocity per NED axis at a
+    #: replan request, m/s (``[companion] drift_window_s``; zeros when off)
+    drift_max_mps: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
     #: the estimate against the plan in force at each replan request (see :class:`TrackingError`)
     tracking: TrackingError = field(default_factory=TrackingError)
     events: list = field(default_factory=list)

@@ -50,6 +50,7 @@ def companion_report(companion: Companion) -> dict:
         "obstacle_intake": companion.obstacles.summary(),
         "vehicle_clock": companion.perception.clock.summary(),
         "tracking_error": state.tracking.summary(),
+        "drift_max_mps": [round(v, 4) for v in state.drift_max_mps],
         "failsafe_events": [(round(t, 2), text) for t, text in state.events if any(w in text for w in _FAILSAFE_WORDS)],
         "events": [(round(t, 2), text) for t, text in state.events],
     }

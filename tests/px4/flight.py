@@ -98,7 +98,7 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
                                                              "min_realised_contour", "replans_with_slack",
                                                              "failed_plans", "plan_status", "failsafe_events",
                                                              "planner_process", "inbound_superseded", "setpoint_gap_max_ms",
-                                                             "vehicle_clock")}
+                                                             "vehicle_clock", "tracking_error", "drift_max_mps")}
     obs = world.obs
     result["world_errors"] = world.errors
     truth_t = np.array([t for t, _ in obs.truth])
