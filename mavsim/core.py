@@ -21,6 +21,7 @@ each obstacle) spawned from ``SeedSequence(seed)``, so a seed fixes every byte.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections import Counter
 from collections.abc import Callable
@@ -33,7 +34,7 @@ from mavsim.signing import enable_signing
 
 from mavsim.autopilot import COMPID, SYSID, Autopilot, statustext
 from mavsim.errors import SimulationError
-from mavsim.noise import GaussMarkovError
+from mavsim.noise import GaussMarkovError, VelocityBias
 from mavsim.obstacles import AUTOPILOT_ALL_LINKS, OWN_API_LINK, ObstacleSystem, noise_factor
 from mavsim.params import ParamStore
 from mavsim.px4 import SEV_WARNING, Commander
@@ -87,6 +88,8 @@ class Simulator:
         seeds = np.random.SeedSequence(self.seed).spawn(1 + len(scenario.obstacles))
         self._rng = np.random.Generator(np.random.PCG64(seeds[0]))
         self._position_error = GaussMarkovError(noise_factor(cfg.position_noise_cov_m2), cfg.position_noise_correlation_s)
+        self._velocity_bias = VelocityBias(cfg.velocity_bias_mps, cfg.velocity_bias_period_s) \
+            if np.any(cfg.velocity_bias_mps) else None
         self._Lv = noise_factor(cfg.velocity_noise_cov_m2ps2)
         self.vparams = VehicleParams(cfg.velocity_time_constant_s, cfg.accel_max_mps2, profile=cfg.vehicle)
         self.vehicle = initial_state(scenario.start_ned_m, cfg.start_yaw_rad)
@@ -151,8 +154,10 @@ class Simulator:
         if self._est_t != self.now_us:
             w = self._rng.standard_normal(6)
             v = self.vehicle
-            self._est = (v.position_ned_m + self._position_error.sample(self.now_us, w[:3]),
-                         v.velocity_ned_mps + self._Lv @ w[3:])
+            velocity = v.velocity_ned_mps + self._Lv @ w[3:]
+            if self._velocity_bias is not None:    # the velocity estimate the velocity loop flies on
+                velocity = velocity + self._velocity_bias.bias(self.now_us * 1e-6)
+            self._est = (v.position_ned_m + self._position_error.sample(self.now_us, w[:3]), velocity)
             self._est_t = self.now_us
         return self._est
 
@@ -263,6 +268,9 @@ class Simulator:
             h = min(self.step_us, t_us - self.now_us)
             dt = h * 1e-6
             cmd = self.commander.update(self.now_us * 1e-6, dt, self.vehicle)
+            if self._velocity_bias is not None:    # the loop holds the biased estimate on the setpoint
+                cmd = dataclasses.replace(cmd, velocity_ned_mps=cmd.velocity_ned_mps
+                                          - self._velocity_bias.bias(self.now_us * 1e-6))
             self.vehicle = step(self.vehicle, cmd, dt, self.vparams)
             self.now_us += h
             self.recorder.update(self.now_us * 1e-6, self.vehicle.position_ned_m,

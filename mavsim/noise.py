@@ -51,3 +51,31 @@ class GaussMarkovError:
             self._e = a * self._e + math.sqrt(1.0 - a * a) * fresh
         self._t_us = t_us
         return self._e
+
+
+
+class VelocityBias:
+    """A slowly varying error of the reported velocity that the vehicle's velocity loop flies on (m/s, NED).
+
+    PX4's velocity loop holds its velocity *estimate* on the setpoint. When that estimate is
+    off by ``b``, the vehicle truly flies ``setpoint - b`` and reports ``true + b``, while the
+    reported position, corrected by GPS and height, follows the truth: the position estimate
+    moves against the velocity estimate by ``-b``. Measured on PX4 SITL (SIH): PX4 reported
+    0.25 to 0.46 m/s descending for 8 s while SIH's truth climbed at about 0.1 m/s, and the
+    position estimate drifted against the velocity by up to 0.6 m/s per axis.
+
+    Here ``b(t) = rate * sin(2 pi t / period_s + phi)`` per axis, the north, east and down axes a
+    quarter period apart (``phi`` 0, pi/2, pi). Deterministic: a function of time only.
+    """
+
+    def __init__(self, rate_mps: np.ndarray, period_s: float) -> None:
+        self.rate = np.asarray(rate_mps, dtype=float)
+        if self.rate.shape != (3,) or not np.all(np.isfinite(self.rate)):
+            raise ValueError(f"velocity bias must be 3 finite numbers (m/s), got {rate_mps!r}")
+        if not (math.isfinite(period_s) and period_s > 0.0):
+            raise ValueError(f"velocity bias period must be finite and > 0 s, got {period_s!r}")
+        self.period_s = float(period_s)
+
+    def bias(self, t_s: float) -> np.ndarray:
+        """The bias at time ``t_s`` (s), NED m/s."""
+        return self.rate * np.sin(2.0 * math.pi * t_s / self.period_s + np.array([0.0, 0.5, 1.0]) * math.pi)

@@ -32,6 +32,14 @@ position_noise_correlation_s : float, default 0
     0 draws it afresh at every instant (white).
 velocity_noise_cov_m2ps2 : 3x3, default 0.001 I
     Covariance of the noise on reported drone velocities ((m/s)^2).
+velocity_bias_mps : 3 numbers, default [0, 0, 0]
+    Amplitude (m/s per NED axis, each at most 5) of a slowly varying error of the reported
+    velocity that the velocity loop flies on, as PX4's does on its EKF's estimate: the
+    vehicle flies the setpoint less the bias and reports its velocity plus the bias, while
+    the reported position follows the truth (``mavsim.noise.VelocityBias``; PX4 SITL: 0.3
+    to 0.5 m/s for seconds).
+velocity_bias_period_s : float, default 20
+    Its period (s).
 start_airborne : bool, default ``start_ned_m[2] < 0``
     Spawn in the air, hovering. With ``false`` the start point is put on the ground.
 start_armed : bool, default ``start_airborne``
@@ -138,6 +146,8 @@ class SimConfig:
     position_noise_cov_m2: np.ndarray = field(default_factory=lambda: 1e-3 * np.eye(3))
     position_noise_correlation_s: float = 0.0
     velocity_noise_cov_m2ps2: np.ndarray = field(default_factory=lambda: 1e-3 * np.eye(3))
+    velocity_bias_mps: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    velocity_bias_period_s: float = 20.0
     start_airborne: bool = True
     start_armed: bool = True
     start_mode: str = "AUTO.LOITER"
@@ -221,6 +231,7 @@ MAX_MAP_ITEMS = 256
 
 SIM_KEYS = {
     "vehicle", "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2", "position_noise_correlation_s",
+    "velocity_bias_mps", "velocity_bias_period_s",
     "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
     "home_lat_deg", "home_lon_deg", "home_alt_m", "geoid_separation_m", "arming_delay_s", "offboard_reject_ack",
     "params", "stream_rates_hz",
@@ -336,6 +347,14 @@ class _Section:
         return out
 
 
+def _velocity_bias(s: _Section) -> np.ndarray:
+    """``velocity_bias_mps``: 3 finite numbers, each at most 5 m/s in size."""
+    rate = s.vector3("velocity_bias_mps", np.zeros(3))
+    if np.abs(rate).max() > 5.0:
+        raise s.err("velocity_bias_mps", "each amplitude must be at most 5 m/s in size")
+    return rate
+
+
 def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
     s = _Section(src, "sim", raw, SIM_KEYS)
     airborne = s.boolean("start_airborne", start_z < 0)
@@ -372,6 +391,8 @@ def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
         position_noise_cov_m2=s.covariance("position_noise_cov_m2", 1e-3 * np.eye(3)),
         position_noise_correlation_s=s.number("position_noise_correlation_s", 0.0, lo=0.0, hi=3600.0),
         velocity_noise_cov_m2ps2=s.covariance("velocity_noise_cov_m2ps2", 1e-3 * np.eye(3)),
+        velocity_bias_mps=_velocity_bias(s),
+        velocity_bias_period_s=s.number("velocity_bias_period_s", 20.0, positive=True, hi=3600.0),
         start_airborne=airborne,
         start_armed=s.boolean("start_armed", airborne),
         start_mode=mode,

@@ -116,3 +116,45 @@ def test_that_the_obstacle_correlation_time_is_a_checked_obstacle_key():
     assert scenario_from_dict({"world": {"obstacles": [base]}}).obstacles[0].measurement_correlation_s == 0.0
     with pytest.raises(ScenarioError, match="measurement_correlation_s"):
         scenario_from_dict({"world": {"obstacles": [dict(base, measurement_correlation_s=-2.0)]}})
+
+
+def test_that_the_velocity_bias_is_a_bounded_checked_function_of_time():
+    from mavsim.noise import VelocityBias
+
+    vb = VelocityBias(np.array([0.3, 0.4, 0.5]), 20.0)
+    t = np.linspace(0.0, 40.0, 4001)
+    b = np.array([vb.bias(x) for x in t])
+    np.testing.assert_allclose(np.abs(b).max(axis=0), [0.3, 0.4, 0.5], rtol=1e-4)
+    np.testing.assert_allclose(b[0], [0.0, 0.4, 0.0], atol=1e-12)      # the axes a quarter period apart
+    np.testing.assert_array_equal(vb.bias(7.3), vb.bias(7.3))          # no state, no draws
+    np.testing.assert_allclose(vb.bias(7.3), vb.bias(27.3), atol=1e-12)
+    assert np.all(scenario_from_dict({}).sim.velocity_bias_mps == 0.0)
+    sim = scenario_from_dict({"sim": {"velocity_bias_mps": [0.0, 0.3, -0.2], "velocity_bias_period_s": 12.0}}).sim
+    assert sim.velocity_bias_mps.tolist() == [0.0, 0.3, -0.2] and sim.velocity_bias_period_s == 12.0
+    for bad in ({"velocity_bias_mps": [0.0, 6.0, 0.0]}, {"velocity_bias_mps": [0.0, 0.1]},
+                {"velocity_bias_period_s": 0.0}):
+        with pytest.raises(ScenarioError, match=next(iter(bad))):
+            scenario_from_dict({"sim": bad})
+
+
+def test_that_the_vehicle_flies_on_the_biased_velocity_and_reports_it():
+    # hovering in AUTO.LOITER with a steady east bias: the reported velocity is the true one plus
+    # the bias, and the vehicle truly flies the hold's setpoint less the bias
+    from mavsim.noise import VelocityBias
+
+    period = 400.0                        # east starts at its full 0.3 m/s and stays near it for seconds
+    scenario = {"vehicle": {"start_ned_m": [0.0, 0.0, -5.0]},
+                "sim": {"velocity_bias_mps": [0.0, 0.3, 0.0], "velocity_bias_period_s": period,
+                        "velocity_noise_cov_m2ps2": (1e-12 * np.eye(3)).tolist()}}
+    parser, gaps = mavlink2.MAVLink(None), []
+    with LockstepSimulator(scenario, seed=1) as sim:
+        for _ in range(30):
+            for _, packet in sim.advance(0.1):
+                for msg in parser.parse_buffer(packet) or []:
+                    if msg.get_type() == "ODOMETRY":
+                        reported_east = msg.vy
+            gaps.append(reported_east - sim.truth.drone_velocity_ned_mps[1])
+    bias_east = VelocityBias(np.array([0.0, 0.3, 0.0]), period).bias(1.5)[1]
+    assert bias_east == pytest.approx(0.3, abs=1e-4)
+    # reported minus true east velocity is the bias (the truth sampled at the end of each 0.1 s)
+    assert np.median(gaps) == pytest.approx(bias_east, abs=0.05)
