@@ -12,47 +12,21 @@ import dataclasses
 
 import numpy as np
 import pytest
-from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.core.planner import Planner
 from companion.errors import ConfigError
-from companion.loop.app import Companion
 from companion.loop.config import load_scenario
-from tests.loop.test_request_gating import SCENARIO, HeldPlanner
-from tests.support.inbound import px4_offboard_heartbeat, received
+from tests.loop.test_request_gating import SCENARIO
+from tests.loop.test_tracking_margin import _companion
+from tests.loop.test_tracking_margin import _fly as fly_north
 
 EXTRA = np.array([0.0, 0.3, -0.2])   # the estimate's position drifts east and up against its velocity
 
 
-def _companion(**loop) -> tuple[Companion, HeldPlanner]:
-    scenario = load_scenario(SCENARIO)
-    scenario = dataclasses.replace(scenario, loop=dataclasses.replace(scenario.loop, **loop))
-    service = HeldPlanner(Planner(scenario.planner))
-    return Companion(scenario, planning=service), service
-
-
-def _fly(companion: Companion, service: HeldPlanner, seconds: float = 3.0) -> tuple[list, list]:
-    """Poses whose velocity says 1 m/s north while the position also drifts by EXTRA, at 20 Hz
-    (LOCAL_POSITION_NED); each job answered a tick later. Returns the jobs and, per tick, the
-    streamed setpoint's velocity with the executor's command and the drift then."""
-    jobs, streamed, t = [], [], 0.0
-    while t < seconds:
-        p = np.array([t, 0.0, -5.0]) + EXTRA * t
-        for msg in (px4_offboard_heartbeat(),
-                    mavlink2.MAVLink_local_position_ned_message(int(t * 1000), *p, 1.0, 0.0, 0.0)):
-            companion.handle(received(msg, t_s=t))
-        out = companion.tick(t)
-        for msg in out:
-            if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
-                streamed.append((np.array([msg.vx, msg.vy, msg.vz]), companion.executor.command.copy(),
-                                 companion.perception.drift_mps()))
-        if service.waiting:
-            if service.waiting[0] not in jobs:
-                jobs.append(service.waiting[0])
-            elif t - service.waiting[0].t_link_s >= 0.05 - 1e-9:
-                service.answer(solve=True)
-        t = round(t + 0.05, 2)
-    return jobs, streamed
+def _fly(companion, service, seconds: float = 3.0) -> tuple[list, list]:
+    """Poses whose velocity says 1 m/s north while the position also drifts by EXTRA (20 Hz); the
+    jobs and, per tick, the streamed velocity with the executor's command and the drift then."""
+    streamed: list = []
+    return fly_north(companion, service, seconds, drift=EXTRA, streamed=streamed), streamed
 
 
 def test_that_the_plans_start_from_the_position_rate_and_the_commands_take_the_drift_off():

@@ -58,14 +58,24 @@ def _companion(**loop) -> tuple[Companion, HeldPlanner]:
     return Companion(scenario, planning=service), service
 
 
-def _fly(companion: Companion, service: HeldPlanner, seconds: float = 2.0) -> list:
-    """Poses flying north at 1 m/s (LOCAL_POSITION_NED) at 20 Hz; every job is answered at the next tick."""
+def _fly(companion: Companion, service: HeldPlanner, seconds: float = 2.0, drift: np.ndarray | None = None,
+         streamed: list | None = None) -> list:
+    """Poses flying north at 1 m/s (LOCAL_POSITION_NED) at 20 Hz; every job is answered at the next tick.
+
+    ``drift`` (m/s NED) moves the reported position against the reported velocity; ``streamed``
+    collects, per tick, the setpoint's velocity with the executor's command and the loop's drift then.
+    """
     jobs, t = [], 0.0
+    extra = np.zeros(3) if drift is None else np.asarray(drift, dtype=float)
     while t < seconds:
+        p = np.array([t, 0.0, -5.0]) + extra * t
         for msg in (px4_offboard_heartbeat(),
-                    mavlink2.MAVLink_local_position_ned_message(int(t * 1000), t, 0.0, -5.0, 1.0, 0.0, 0.0)):
+                    mavlink2.MAVLink_local_position_ned_message(int(t * 1000), *p, 1.0, 0.0, 0.0)):
             companion.handle(received(msg, t_s=t))
-        companion.tick(t)
+        for msg in companion.tick(t):
+            if streamed is not None and msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
+                streamed.append((np.array([msg.vx, msg.vy, msg.vz]), companion.executor.command.copy(),
+                                 companion.perception.drift_mps()))
         if service.waiting:
             if service.waiting[0] not in jobs:
                 jobs.append(service.waiting[0])
