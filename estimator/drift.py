@@ -6,8 +6,8 @@ position without showing in the velocity. Over a window of reports the drift is:
     d = ((p_n - p_0) - integral of v over [t_0, t_n]) / (t_n - t_0)      (m/s, NED)
 
 (the velocity integrated by the trapezoid rule over the reports). Zero for a consistent
-estimate. Measured on PX4 SITL (SIH quadrotor, 2 s window): up to 0.5 m/s east through
-an encounter and 0.35 m/s down for 8 s near the goal, with PX4's velocity loop holding
+estimate. Measured on PX4 SITL (SIH quadrotor, 2 s window): up to 0.5 m/s on the east axis through
+an encounter and 0.35 m/s up for 8 s near the goal, with PX4's velocity loop holding
 its velocity estimate on the setpoint: a planner that predicts positions from velocities
 alone then misses where the estimate goes, and near a goal a pull proportional to the
 distance stalls against it (docs/PX4.md).
