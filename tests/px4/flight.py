@@ -106,7 +106,7 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
     np.savez(work / "traces.npz", truth_t=truth_t, truth_p=truth_p.reshape(-1, 3),
              est_t=np.array([t for t, _ in obs.estimate]), est_p=np.array([p for _, p in obs.estimate]).reshape(-1, 3),
              modes=np.array(obs.modes, float).reshape(-1, 4), offboard_t=np.nan if obs.offboard_t is None else obs.offboard_t,
-             exit_t=t_exit, truth_stamp_s=np.array(obs.truth_stamp_s), est_stamp_s=np.array(obs.estimate_stamp_s))
+             exit_t=t_exit, est_stamp_s=np.array(obs.estimate_stamp_s))
     if obs.offboard_t is None or truth_t.size == 0:
         result["ok"] = False
         result["why"] = "never in OFFBOARD" if truth_t.size else "no ground truth received"

@@ -82,8 +82,8 @@ class Observations:
     texts: list[tuple[float, str]] = field(default_factory=list)
     obstacles: list[tuple[float, np.ndarray]] = field(default_factory=list)       # (t, (P, 3) true positions)
     estimate: list[tuple[float, np.ndarray]] = field(default_factory=list)       # (t, PX4's LOCAL_POSITION_NED)
-    truth_stamp_s: list[float] = field(default_factory=list)     # HIL_STATE_QUATERNION.time_usec of each truth sample
-    estimate_stamp_s: list[float] = field(default_factory=list)  # LOCAL_POSITION_NED.time_boot_ms of each estimate
+    estimate_stamp_s: list[float] = field(default_factory=list)  # LOCAL_POSITION_NED.time_boot_ms of each estimate, s
+    # (the truth has no usable stamp: SIH sends HIL_STATE_QUATERNION with time_usec 0)
     offboard_t: float | None = None
 
 
@@ -184,4 +184,3 @@ class World(threading.Thread):
         north = math.radians(lat - lat0) * EARTH_RADIUS_M
         east = math.radians(lon - lon0) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
         self.obs.truth.append((now, np.array([north, east, -(alt - alt0)])))
-        self.obs.truth_stamp_s.append(msg.time_usec * 1e-6)
