@@ -1,4 +1,4 @@
-"""The drone's reported position error: white, or time-correlated as an EKF's is.
+"""The drone's reported position error (white, or time-correlated as an EKF's is) and velocity bias.
 
 PX4's EKF does not report a fresh independent error at every message: its position
 error wanders slowly (GNSS multipath, bias states), so consecutive reports share most of
@@ -12,6 +12,9 @@ starts stationary, ``e(0) = L w``), and the correlation between two instants ``d
 apart is ``a``. The simulator reports ``P`` in ODOMETRY, so the reported covariance is
 the error's true marginal covariance (a consistent report: NEES ~ chi2_3), white or not.
 ``tau = 0`` is white noise, ``e = L w`` at every instant (the default).
+
+:class:`VelocityBias` is the other way an EKF's estimate is off: a slowly varying error of
+the velocity, which PX4's velocity loop flies on (``[sim] velocity_bias_mps``).
 """
 
 from __future__ import annotations
@@ -51,7 +54,6 @@ class GaussMarkovError:
             self._e = a * self._e + math.sqrt(1.0 - a * a) * fresh
         self._t_us = t_us
         return self._e
-
 
 
 class VelocityBias:

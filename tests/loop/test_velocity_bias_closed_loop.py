@@ -9,7 +9,6 @@ estimate's position rate and the companion reaches the goal.
 
 from __future__ import annotations
 
-import copy
 import tomllib
 from pathlib import Path
 
@@ -24,7 +23,6 @@ ROOT = Path(__file__).resolve().parents[2]
 def _scenario(drift_window_s: float) -> dict:
     with open(ROOT / "configs" / "antipodal_px4.toml", "rb") as f:
         data = tomllib.load(f)
-    data = copy.deepcopy(data)
     data["sim"] = {"vehicle": "px4",
                    "position_noise_cov_m2": [[0.02, 0, 0], [0, 0.02, 0], [0, 0, 0.02]],
                    "position_noise_correlation_s": 5.0,
