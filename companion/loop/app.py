@@ -243,9 +243,11 @@ class Companion:
         if seq.engaged and self.loop.setpoint_kind == "position_velocity" and self.state.mode is LoopMode.TRACKING:
             t_v = self.perception.vehicle_time(t_s)
             reference = self.executor.reference(t_v) if t_v is not None else None
-        if seq.engaged and self.perception.drift is not None:
+        if seq.engaged and self.perception.drift is not None and self.state.mode is not LoopMode.STALE:
             # the plan is in the estimate's position rate: the autopilot's velocity loop gets
-            # the plan's velocity less the estimate's drift (see LoopConfig.drift_window_s)
+            # the plan's velocity less the estimate's drift (see LoopConfig.drift_window_s);
+            # not while the estimate is stale: a drift measured before the silence is no
+            # reason to command a velocity while braking blind
             drift = self.perception.drift_mps()
             command = command - drift
             if reference is not None:

@@ -60,3 +60,20 @@ def test_that_the_window_is_checked_by_name():
     for bad in (-1.0, 11.0, float("nan")):
         with pytest.raises(ConfigError, match="drift_window_s"):
             dataclasses.replace(scenario.loop, drift_window_s=bad)
+
+
+def test_that_a_stale_estimate_brakes_without_the_drift():
+    companion, service = _companion(drift_window_s=1.0, initial_velocity="estimate", plan_lead_max_s=0.0)
+    _fly(companion, service)
+    assert np.any(companion.perception.drift_mps())     # measured before the silence
+    sent = []
+    for k in range(1, 61):                                # 3 s with no pose: stale, then braked to rest
+        t = round(3.0 + 0.05 * k, 2)
+        for msg in companion.tick(t):
+            if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
+                sent.append((companion.state.mode, np.array([msg.vx, msg.vy, msg.vz]), companion.executor.command.copy()))
+    stale = [(v, cmd) for mode, v, cmd in sent if mode == "stale"]
+    assert len(stale) >= 5
+    for v, cmd in stale:
+        np.testing.assert_array_equal(v, cmd)            # the brake alone, no drift taken off
+    np.testing.assert_array_equal(stale[-1][0], np.zeros(3))
