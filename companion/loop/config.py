@@ -165,6 +165,7 @@ class LoopConfig:
         estimate plus the drift, and each streamed velocity is the plan's minus the drift,
         so that the estimate moves as planned (offset-free tracking of an EKF that corrects
         its position without its velocity; measured on PX4 SITL up to 0.5 m/s, docs/PX4.md).
+        Not applied while the estimate is stale (the loop brakes to zero).
     setpoint_kind : ``"velocity"`` (default) streams the plan's velocity commands;
         ``"position_velocity"`` streams the plan's position with its velocity as feed-forward
         while tracking a plan (PX4's position loop removes the slow tail of its velocity response).
