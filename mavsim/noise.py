@@ -77,7 +77,8 @@ class VelocityBias:
         if not (math.isfinite(period_s) and period_s > 0.0):
             raise ValueError(f"velocity bias period must be finite and > 0 s, got {period_s!r}")
         self.period_s = float(period_s)
+        self._phase = np.array([0.0, 0.5, 1.0]) * math.pi    # north, east, down: a quarter period apart
 
     def bias(self, t_s: float) -> np.ndarray:
         """The bias at time ``t_s`` (s), NED m/s."""
-        return self.rate * np.sin(2.0 * math.pi * t_s / self.period_s + np.array([0.0, 0.5, 1.0]) * math.pi)
+        return self.rate * np.sin(2.0 * math.pi * t_s / self.period_s + self._phase)
