@@ -29,30 +29,29 @@ def _checked_pairs_signature(t):
 def _checked_pairs3(c, s):
     """Check and lay out ``n`` covariances ``c`` (n, 3, 3) as symmetrised components ``s`` (3, 3, n).
 
-    The checks of ``overlap.CovariancePairs.from_arrays`` on finite covariances (it checks
-    finiteness before), with its arithmetic: each off-diagonal pair within ``1e-9`` of the
-    largest entry's magnitude (plus
+    The checks of ``overlap.CovariancePairs.from_arrays``, with its arithmetic: every entry
+    finite; each off-diagonal pair within ``1e-9`` of the largest entry's magnitude (plus
     ``1e-300``) of each other; then ``0.5 (upper + lower)`` written to both, the diagonal
     as it is; positive definite by Sylvester's criterion on the symmetrised matrix, with
     ``small_matrix.det``'s formula. Returns -1 when every matrix passes, else the index of
     the first that does not.
     """
     for k in range(c.shape[0]):
-        largest = 0.0
-        for r in range(3):
-            for q in range(3):
-                largest = max(largest, abs(c[k, r, q]))
+        c00, c01, c02 = c[k, 0, 0], c[k, 0, 1], c[k, 0, 2]
+        c10, c11, c12 = c[k, 1, 0], c[k, 1, 1], c[k, 1, 2]
+        c20, c21, c22 = c[k, 2, 0], c[k, 2, 1], c[k, 2, 2]
+        # x - x is 0 for a finite x and NaN for an infinite or NaN one
+        if ((c00 - c00) + (c01 - c01) + (c02 - c02) + (c10 - c10) + (c11 - c11) + (c12 - c12)
+                + (c20 - c20) + (c21 - c21) + (c22 - c22)) != 0.0:
+            return k
+        largest = max(abs(c00), abs(c01), abs(c02), abs(c10), abs(c11), abs(c12), abs(c20), abs(c21), abs(c22))
         bound = 1e-9 * largest + 1e-300
-        for r in range(3):
-            s[r, r, k] = c[k, r, r]
-            for q in range(r + 1, 3):
-                upper, lower = c[k, r, q], c[k, q, r]
-                if abs(upper - lower) > bound:
-                    return k
-                m = 0.5 * (upper + lower)
-                s[r, q, k] = m
-                s[q, r, k] = m
-        a, b, cc, d, e, f = s[0, 0, k], s[0, 1, k], s[0, 2, k], s[1, 1, k], s[1, 2, k], s[2, 2, k]
+        if abs(c01 - c10) > bound or abs(c02 - c20) > bound or abs(c12 - c21) > bound:
+            return k
+        a, d, f = c00, c11, c22
+        b, cc, e = 0.5 * (c01 + c10), 0.5 * (c02 + c20), 0.5 * (c12 + c21)
+        s[0, 0, k], s[1, 1, k], s[2, 2, k] = a, d, f
+        s[0, 1, k], s[1, 0, k], s[0, 2, k], s[2, 0, k], s[1, 2, k], s[2, 1, k] = b, b, cc, cc, e, e
         det = a * (d * f - e * e) + b * (cc * e - b * f) + cc * (b * e - cc * d)
         if not (a > 0.0 and a * d - b * b > 0.0 and det > 0.0):
             return k
@@ -60,8 +59,8 @@ def _checked_pairs3(c, s):
 
 
 def checked_pairs3(c: np.ndarray) -> np.ndarray | None:
-    """:func:`_checked_pairs3` on a finite float64 batch ``c`` (n, 3, 3), square metres: its (3, 3, n)
-    symmetrised components, or None when a matrix is not symmetric and positive definite."""
+    """:func:`_checked_pairs3` on a float64 batch ``c`` (n, 3, 3), square metres: its (3, 3, n)
+    symmetrised components, or None when a matrix is not finite, symmetric and positive definite."""
     s = np.empty((3, 3, c.shape[0]))
     return s if _checked_pairs3()(np.ascontiguousarray(c, dtype=float), s) < 0 else None
 

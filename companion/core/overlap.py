@@ -140,13 +140,19 @@ def confidence_from_overlap(overlap: ArrayLike, dim: int) -> Array | float:
 # --------------------------------------------------------------------------------------
 
 
-def _checked(name: str, value: ArrayLike, extra: int) -> Array:
+def _checked(name: str, value: ArrayLike, extra: int, finite: bool = True) -> Array:
+    """``value`` as a float array of at least ``extra`` dimensions, checked finite unless ``finite`` is false."""
     arr = np.asarray(value, dtype=float)
     if arr.ndim < extra:
         raise InputError(f"{name} must have at least {extra} dimension(s), got shape {arr.shape}")
+    if finite:
+        _require_finite(name, arr)
+    return arr
+
+
+def _require_finite(name: str, arr: Array) -> None:
     if not np.isfinite(arr).all():
         raise InputError(f"{name} contains NaN or infinite values")
-    return arr
 
 
 def _require_pd(ok: NDArray[np.bool_], name: str) -> None:
@@ -218,7 +224,7 @@ class CovariancePairs:
             s1, s2 = (_symmetrised_components(name, K.matrices_to_components(np.broadcast_to(arr, lead + (d, d))),
                                               check=False) for name, arr in (("cov1", c1), ("cov2", c2)))
             return cls(lead=tuple(lead), s1=s1, s2=s2)
-        c1, c2 = _checked("cov1", cov1, 2), _checked("cov2", cov2, 2)
+        c1, c2 = _checked("cov1", cov1, 2, finite=False), _checked("cov2", cov2, 2, finite=False)
         d = c1.shape[-1]
         for name, arr in (("cov1", c1), ("cov2", c2)):
             if arr.shape[-2:] != (d, d):
@@ -231,10 +237,12 @@ class CovariancePairs:
         out = []
         for name, arr in (("cov1", c1), ("cov2", c2)):
             full = np.broadcast_to(arr, lead + (d, d))
-            # 3-D: one compiled pass checks, symmetrises and lays out (the same tests, the same bits);
-            # a matrix it rejects sends the batch through numpy, which words the error
+            # 3-D: one compiled pass checks (finite, symmetric, positive definite), symmetrises and
+            # lays out (the same tests, the same bits); a matrix it rejects sends the batch
+            # through numpy, which words the error
             comp = covariance_checks.checked_pairs3(full.reshape(-1, 3, 3)) if d == 3 and jit.available() else None
             if comp is None:
+                _require_finite(name, arr)
                 comp = _symmetrised_components(name, K.matrices_to_components(full))
                 _require_pd(K.is_positive_definite(comp).reshape(lead), name)
             out.append(comp)
@@ -281,7 +289,7 @@ def _validate_pair(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayL
     broadcast to common leading dimensions.
     """
     m1, m2 = _checked("mu1", mu1, 1), _checked("mu2", mu2, 1)
-    c1, c2 = _checked("cov1", cov1, 2), _checked("cov2", cov2, 2)
+    c1, c2 = _checked("cov1", cov1, 2, finite=False), _checked("cov2", cov2, 2, finite=False)   # by from_arrays
     d = m1.shape[-1]
     if m2.shape[-1] != d:
         raise InputError(f"mu1 and mu2 must have the same last dimension, got {m1.shape} and {m2.shape}")
