@@ -34,8 +34,9 @@ def _checked_pairs3(c, s):
     ``1e-300``) of each other; then ``0.5 (upper + lower)`` written to both, the diagonal
     as it is; positive definite by Sylvester's criterion on the symmetrised matrix, with
     ``small_matrix.det``'s formula. Returns -1 when every matrix passes, else the index of
-    the first that does not.
+    the first that does not. An ``s`` of no pairs ((3, 3, 0)) asks for the checks alone.
     """
+    write = s.shape[2] > 0
     for k in range(c.shape[0]):
         c00, c01, c02 = c[k, 0, 0], c[k, 0, 1], c[k, 0, 2]
         c10, c11, c12 = c[k, 1, 0], c[k, 1, 1], c[k, 1, 2]
@@ -50,8 +51,9 @@ def _checked_pairs3(c, s):
             return k
         a, d, f = c00, c11, c22
         b, cc, e = 0.5 * (c01 + c10), 0.5 * (c02 + c20), 0.5 * (c12 + c21)
-        s[0, 0, k], s[1, 1, k], s[2, 2, k] = a, d, f
-        s[0, 1, k], s[1, 0, k], s[0, 2, k], s[2, 0, k], s[1, 2, k], s[2, 1, k] = b, b, cc, cc, e, e
+        if write:
+            s[0, 0, k], s[1, 1, k], s[2, 2, k] = a, d, f
+            s[0, 1, k], s[1, 0, k], s[0, 2, k], s[2, 0, k], s[1, 2, k], s[2, 1, k] = b, b, cc, cc, e, e
         det = a * (d * f - e * e) + b * (cc * e - b * f) + cc * (b * e - cc * d)
         if not (a > 0.0 and a * d - b * b > 0.0 and det > 0.0):
             return k
@@ -63,6 +65,15 @@ def checked_pairs3(c: np.ndarray) -> np.ndarray | None:
     symmetrised components, or None when a matrix is not finite, symmetric and positive definite."""
     s = np.empty((3, 3, c.shape[0]))
     return s if _checked_pairs3()(np.ascontiguousarray(c, dtype=float), s) < 0 else None
+
+
+def valid_pairs3(c: np.ndarray) -> bool:
+    """Whether every covariance of the float64 batch ``c`` (n, 3, 3), square metres, is finite,
+    symmetric and positive definite by :func:`_checked_pairs3`'s checks (nothing laid out)."""
+    return _checked_pairs3()(np.ascontiguousarray(c, dtype=float), _NO_PAIRS) < 0
+
+
+_NO_PAIRS = np.empty((3, 3, 0))
 
 
 def _first_invalid_signature(t):

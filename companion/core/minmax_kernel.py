@@ -44,18 +44,23 @@ _BLOCK = 64
 
 
 def _signature(t):
-    """Means (3, n) and covariances (3, 3, n) in, then the outputs (n,) and (3, n); returns an int."""
+    """Means (3, n) or (n, 3) and covariances (3, 3, n) or (n, 3, 3) in, the layout flag, then the
+    outputs (n,) and (3, n); returns an int."""
     r2, r3, w1, w2 = jit.readonly(t, 2), jit.readonly(t, 3), t.float64[::1], t.float64[:, ::1]
-    return t.int64(r2, r2, r3, r3, t.float64, t.int64, w1, w1, w1, w2, w1, w2, w1, w1, w2)
+    return t.int64(r2, r2, r3, r3, t.float64, t.int64, t.boolean, w1, w1, w1, w2, w1, w2, w1, w1, w2)
 
 
 @jit.lazy(_signature)
-def _minmax3(m1, m2, s1, s2, u_tol, max_newton,
+def _minmax3(m1, m2, s1, s2, u_tol, max_newton, batch_first,
              lam, eta, residual, alpha, beta, normal, sc1, sc2, grad):
     """Per pair ``p`` of 3-D Gaussians ``N(m1, s1)``, ``N(m2, s2)``: the minmax separator.
 
-    Inputs (batch last): means ``m1``, ``m2`` (3, n) in metres; covariances ``s1``, ``s2``
-    (3, 3, n), symmetric positive definite, square metres. Writes ``lam``, ``eta``,
+    Inputs: means ``m1``, ``m2`` in metres and covariances ``s1``, ``s2`` in square metres,
+    positive definite, either batch last (``batch_first`` false: (3, n) and (3, 3, n)
+    symmetric components, as :class:`companion.core.overlap.CovariancePairs` lays them out)
+    or batch first as given to ``minmax`` ((n, 3) and (n, 3, 3), checked finite and
+    symmetric to tolerance: each off-diagonal pair is read as ``0.5 (upper + lower)``, the
+    layout pass's value, so both layouts give the same bits). Writes ``lam``, ``eta``,
     ``residual`` (``eta1 - eta2``), ``beta``, ``sc1``, ``sc2`` (the support scales
     ``sqrt(x'S x) / |x|``) as (n,) and
     ``alpha``, ``normal``, ``grad`` (``d eta / d mu1``) as (3, n). Returns the number of
@@ -68,25 +73,41 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton,
     the processor overlaps their chains of exp, log and divisions, which one pair's
     iteration leaves waiting on each other (12 % less time on 10,000 pairs).
     """
-    n = m1.shape[1]
+    n = m1.shape[0] if batch_first else m1.shape[1]
     stalled = 0
     coef = np.empty((_BLOCK, 18))     # per pair of the block: c41 c42 c31 c32 c21 c22 c11 c12 c01 c02, g31 .. g02
+    pair = np.empty((_BLOCK, 19))     # per pair of the block: S1, S2 (six entries each), m1, delta, coincident
     us, los, his = np.empty(_BLOCK), np.empty(_BLOCK), np.empty(_BLOCK)
     active = np.empty(_BLOCK, np.int64)
     for start in range(0, n, _BLOCK):
         size = min(_BLOCK, n - start)
         for k in range(size):
             p = start + k
-            a, b, c = s1[0, 0, p], s1[0, 1, p], s1[0, 2, p]
-            d, e, f = s1[1, 1, p], s1[1, 2, p], s1[2, 2, p]
-            aa, bb, cc = s2[0, 0, p], s2[0, 1, p], s2[0, 2, p]
-            dd, ee, ff = s2[1, 1, p], s2[1, 2, p], s2[2, 2, p]
+            if batch_first:
+                a, d, f = s1[p, 0, 0], s1[p, 1, 1], s1[p, 2, 2]
+                b, c = 0.5 * (s1[p, 0, 1] + s1[p, 1, 0]), 0.5 * (s1[p, 0, 2] + s1[p, 2, 0])
+                e = 0.5 * (s1[p, 1, 2] + s1[p, 2, 1])
+                aa, dd, ff = s2[p, 0, 0], s2[p, 1, 1], s2[p, 2, 2]
+                bb, cc = 0.5 * (s2[p, 0, 1] + s2[p, 1, 0]), 0.5 * (s2[p, 0, 2] + s2[p, 2, 0])
+                ee = 0.5 * (s2[p, 1, 2] + s2[p, 2, 1])
+                mx, my, mz = m1[p, 0], m1[p, 1], m1[p, 2]
+                dx, dy, dz = m2[p, 0] - mx, m2[p, 1] - my, m2[p, 2] - mz
+            else:
+                a, b, c = s1[0, 0, p], s1[0, 1, p], s1[0, 2, p]
+                d, e, f = s1[1, 1, p], s1[1, 2, p], s1[2, 2, p]
+                aa, bb, cc = s2[0, 0, p], s2[0, 1, p], s2[0, 2, p]
+                dd, ee, ff = s2[1, 1, p], s2[1, 2, p], s2[2, 2, p]
+                mx, my, mz = m1[0, p], m1[1, p], m1[2, p]
+                dx, dy, dz = m2[0, p] - mx, m2[1, p] - my, m2[2, p] - mz
             # delta = m2 - m1; coincident means take a fixed direction scaled like the covariances
-            dx, dy, dz = m2[0, p] - m1[0, p], m2[1, p] - m1[1, p], m2[2, p] - m1[2, p]
             scale = math.sqrt(max(a + d + f, aa + dd + ff))
             same = math.sqrt(dx * dx + dy * dy + dz * dz) <= 1e-15 * scale
             if same:
                 dx, dy, dz = scale, 0.0, 0.0
+            pair[k, 0], pair[k, 1], pair[k, 2], pair[k, 3], pair[k, 4], pair[k, 5] = a, b, c, d, e, f
+            pair[k, 6], pair[k, 7], pair[k, 8], pair[k, 9], pair[k, 10], pair[k, 11] = aa, bb, cc, dd, ee, ff
+            pair[k, 12], pair[k, 13], pair[k, 14], pair[k, 15], pair[k, 16], pair[k, 17] = mx, my, mz, dx, dy, dz
+            pair[k, 18] = 1.0 if same else 0.0
             # adjugates of S1, S2 and S1 + S2 (symmetric: six entries each)
             p00, p01, p02 = d * f - e * e, c * e - b * f, b * e - c * d
             p11, p12, p22 = a * f - c * c, b * c - a * e, a * d - b * b
@@ -182,15 +203,10 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton,
         for k in range(size):
             p = start + k
             u = us[k]
-            a, b, c = s1[0, 0, p], s1[0, 1, p], s1[0, 2, p]
-            d, e, f = s1[1, 1, p], s1[1, 2, p], s1[2, 2, p]
-            aa, bb, cc = s2[0, 0, p], s2[0, 1, p], s2[0, 2, p]
-            dd, ee, ff = s2[1, 1, p], s2[1, 2, p], s2[2, 2, p]
-            dx, dy, dz = m2[0, p] - m1[0, p], m2[1, p] - m1[1, p], m2[2, p] - m1[2, p]
-            scale = math.sqrt(max(a + d + f, aa + dd + ff))
-            same = math.sqrt(dx * dx + dy * dy + dz * dz) <= 1e-15 * scale
-            if same:
-                dx, dy, dz = scale, 0.0, 0.0
+            a, b, c, d, e, f = pair[k, 0], pair[k, 1], pair[k, 2], pair[k, 3], pair[k, 4], pair[k, 5]
+            aa, bb, cc, dd, ee, ff = pair[k, 6], pair[k, 7], pair[k, 8], pair[k, 9], pair[k, 10], pair[k, 11]
+            mx, my, mz, dx, dy, dz = pair[k, 12], pair[k, 13], pair[k, 14], pair[k, 15], pair[k, 16], pair[k, 17]
+            same = pair[k, 18] != 0.0
             # the separator at the root: x = adj(A) delta / det(A), A = t S1 + S2
             t = math.exp(u)
             lm = t / (1.0 + t)
@@ -217,7 +233,7 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton,
             if same:
                 et, res, al0, al1, al2 = 0.0, 0.0, 0.0, 0.0, 0.0
             sa0, sa1, sa2 = a * al0 + b * al1 + c * al2, b * al0 + d * al1 + e * al2, c * al0 + e * al1 + f * al2
-            beta[p] = (al0 * m1[0, p] + al1 * m1[1, p] + al2 * m1[2, p]) + lm * (al0 * sa0 + al1 * sa1 + al2 * sa2)
+            beta[p] = (al0 * mx + al1 * my + al2 * mz) + lm * (al0 * sa0 + al1 * sa1 + al2 * sa2)
             ksum = k1 + k2
             lam[p], eta[p], residual[p], sc1[p], sc2[p] = lm, et, res, k1, k2
             alpha[0, p], alpha[1, p], alpha[2, p] = al0, al1, al2
@@ -266,17 +282,21 @@ def shared_pairs3(c1: np.ndarray, c2: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
-            u_tol: float, max_newton: int) -> tuple[np.ndarray, int]:
+            u_tol: float, max_newton: int, batch_first: bool = False) -> tuple[np.ndarray, int]:
     """The separator fields of ``n`` validated 3-D pairs, and how many pairs did not converge.
 
     Parameters
     ----------
-    m1, m2 : (3, n) arrays
+    m1, m2 : (3, n) arrays, or (n, 3) with ``batch_first``
         Means, metres (any frame, the same for both).
-    s1, s2 : (3, 3, n) arrays
-        Validated symmetric positive definite covariances, square metres.
+    s1, s2 : (3, 3, n) arrays, or (n, 3, 3) with ``batch_first``
+        Validated positive definite covariances, square metres: symmetric components, or
+        with ``batch_first`` matrices symmetric to the checks' tolerance (the kernel
+        symmetrises them as it reads them).
     u_tol, max_newton : float, int
         Newton's relative step tolerance in ``u = log t`` and its step cap.
+    batch_first : bool
+        The layout of the inputs (the outputs are batch last either way).
 
     Returns
     -------
@@ -288,8 +308,8 @@ def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
     stalled : int
         Pairs whose iteration hit ``max_newton`` steps.
     """
-    out = np.empty((15, m1.shape[1]))
+    out = np.empty((15, m1.shape[0] if batch_first else m1.shape[1]))
     stalled = _minmax3()(np.ascontiguousarray(m1), np.ascontiguousarray(m2), np.ascontiguousarray(s1),
-                          np.ascontiguousarray(s2), float(u_tol), int(max_newton),
+                          np.ascontiguousarray(s2), float(u_tol), int(max_newton), bool(batch_first),
                           out[0], out[1], out[2], out[6:9], out[3], out[9:12], out[4], out[5], out[12:15])
     return out, int(stalled)
