@@ -18,7 +18,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import logging
-from types import ModuleType
+from types import FunctionType, ModuleType
 from typing import Callable
 
 logger = logging.getLogger(__name__)
@@ -60,13 +60,39 @@ def lazy(signature: Callable[[ModuleType], object]) -> Callable[[Callable], Call
         def compiled() -> Callable:
             import numba
 
-            return numba.njit(signature(numba.types), cache=True, nogil=True, error_model="numpy")(fn)
+            return numba.njit(signature(numba.types), cache=True, nogil=True, error_model="numpy")(_with_inlined(fn))
 
         compiled.py_func = fn    # the Python original (tests compare the two)
         _REGISTERED.append(compiled)
         return compiled
 
     return register
+
+
+def inline(fn: Callable) -> Callable:
+    """Decorator: a helper of the compiled functions of its own module, inlined into each.
+
+    Compiled, a registered function calls the helper's numba version, inlined where it is
+    called (the same operations as written out there, so the same bits); from Python (the
+    fallback without numba, the tests) the helper is the plain function. Keep a helper in
+    the module of the functions calling it: numba's disk cache is renewed when that
+    module's file changes, not when another module does.
+    """
+    fn.__jit_inline__ = True
+    return fn
+
+
+def _with_inlined(fn: Callable) -> Callable:
+    """``fn``, or a copy of it whose globals hold the numba versions of its module's :func:`inline` helpers."""
+    import numba
+
+    helpers = {name: numba.njit(inline="always", error_model="numpy")(value)
+               for name, value in fn.__globals__.items() if getattr(value, "__jit_inline__", False)}
+    if not helpers:
+        return fn
+    copy = FunctionType(fn.__code__, {**fn.__globals__, **helpers}, fn.__name__, fn.__defaults__, fn.__closure__)
+    copy.__qualname__, copy.__doc__ = fn.__qualname__, fn.__doc__
+    return copy
 
 
 def readonly(types: ModuleType, ndim: int) -> object:

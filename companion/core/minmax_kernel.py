@@ -43,6 +43,69 @@ from companion.core import jit
 _BLOCK = 64
 
 
+@jit.inline
+def _checked_covariance(c00, c01, c02, c10, c11, c12, c20, c21, c22):
+    """``(ok, a, b, c, d, e, f)``: whether the 3x3 covariance with these entries (square metres) is
+    usable, and its upper triangle symmetrised (``0.5 (upper + lower)`` off the diagonal).
+
+    Usable: every entry finite (``x - x`` is 0 for a finite ``x`` and NaN otherwise); each
+    off-diagonal pair within ``1e-9`` of the largest entry's magnitude (plus ``1e-300``) of
+    each other; positive definite by Sylvester's criterion on the symmetrised matrix with
+    ``small_matrix.det``'s formula. The checks of ``overlap.CovariancePairs.from_arrays``
+    with its arithmetic, so the same decisions.
+    """
+    finite = ((c00 - c00) + (c01 - c01) + (c02 - c02) + (c10 - c10) + (c11 - c11) + (c12 - c12)
+              + (c20 - c20) + (c21 - c21) + (c22 - c22)) == 0.0
+    largest = max(abs(c00), abs(c01), abs(c02), abs(c10), abs(c11), abs(c12), abs(c20), abs(c21), abs(c22))
+    bound = 1e-9 * largest + 1e-300
+    a, d, f = c00, c11, c22
+    b, c, e = 0.5 * (c01 + c10), 0.5 * (c02 + c20), 0.5 * (c12 + c21)
+    det = a * (d * f - e * e) + b * (c * e - b * f) + c * (b * e - c * d)
+    ok = (finite and abs(c01 - c10) <= bound and abs(c02 - c20) <= bound and abs(c12 - c21) <= bound
+          and a > 0.0 and a * d - b * b > 0.0 and det > 0.0)
+    return ok, a, b, c, d, e, f
+
+
+@jit.inline
+def _newton_step(coef, us, los, his, k, u_tol):
+    """One safeguarded Newton step on ``phi(u)`` for pair ``k`` of a block; whether it needs another.
+
+    ``coef[k]``: the pair's quartic coefficients; ``us``, ``los``, ``his``: its ``u`` and the
+    bracket ``[lo, hi]`` the signs of ``phi`` have shown, updated in place. Bisection where
+    Newton leaves a two-sided bracket, steps capped at 4 until both ends are known; another
+    step is needed while this one moved ``u`` by more than ``u_tol`` (relative).
+    """
+    u, lo, hi = us[k], los[k], his[k]
+    c41, c42, c31, c32, c21, c22 = coef[k, 0], coef[k, 1], coef[k, 2], coef[k, 3], coef[k, 4], coef[k, 5]
+    c11, c12, c01, c02 = coef[k, 6], coef[k, 7], coef[k, 8], coef[k, 9]
+    g31, g32, g21, g22 = coef[k, 10], coef[k, 11], coef[k, 12], coef[k, 13]
+    g11, g12, g01, g02 = coef[k, 14], coef[k, 15], coef[k, 16], coef[k, 17]
+    t = math.exp(u)
+    val1, val2 = c41 * t + c31, c42 * t + c32
+    der1, der2 = g31 * t + g21, g32 * t + g22
+    val1, val2 = val1 * t + c21, val2 * t + c22
+    der1, der2 = der1 * t + g11, der2 * t + g12
+    val1, val2 = val1 * t + c11, val2 * t + c12
+    der1, der2 = der1 * t + g01, der2 * t + g02
+    val1, val2 = val1 * t + c01, val2 * t + c02
+    phi = 2.0 * u + math.log(val1 / val2)
+    dphi = 2.0 + t * (der1 / val1 - der2 / val2)
+    if phi < 0.0:
+        lo = max(lo, u)
+    if phi > 0.0:
+        hi = min(hi, u)
+    step = -phi / dphi
+    new_u = u + step
+    if math.isfinite(lo) and math.isfinite(hi):
+        slack = 1e-12 * (1.0 + abs(u))
+        if new_u < lo - slack or new_u > hi + slack:
+            new_u = 0.5 * (lo + hi)
+    else:
+        new_u = u + min(max(step, -4.0), 4.0)
+    us[k], los[k], his[k] = new_u, lo, hi
+    return abs(new_u - u) > u_tol * max(1.0, abs(u))
+
+
 def _signature(t):
     """Means (3, n) or (n, 3) and covariances (3, 3, n) or (n, 3, 3) in, the layout flag, then the
     outputs (n,) and (3, n); returns an int."""
@@ -56,22 +119,23 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton, batch_first,
     """Per pair ``p`` of 3-D Gaussians ``N(m1, s1)``, ``N(m2, s2)``: the minmax separator.
 
     Inputs: means ``m1``, ``m2`` in metres and covariances ``s1``, ``s2`` in square metres,
-    positive definite, either batch last (``batch_first`` false: (3, n) and (3, 3, n)
-    symmetric components, as :class:`companion.core.overlap.CovariancePairs` lays them out)
-    or batch first as given to ``minmax`` ((n, 3) and (n, 3, 3), checked finite and
-    symmetric to tolerance: each off-diagonal pair is read as ``0.5 (upper + lower)``, the
-    layout pass's value, so both layouts give the same bits). Writes ``lam``, ``eta``,
-    ``residual`` (``eta1 - eta2``), ``beta``, ``sc1``, ``sc2`` (the support scales
-    ``sqrt(x'S x) / |x|``) as (n,) and
+    either batch last and validated (``batch_first`` false: (3, n) and (3, 3, n) symmetric
+    positive definite components, as :class:`companion.core.overlap.CovariancePairs` lays
+    them out) or batch first as given to ``minmax`` ((n, 3) and (n, 3, 3), unchecked: each
+    pair is checked as it is read, :func:`_checked_covariance` and finite means, and each
+    off-diagonal pair read as ``0.5 (upper + lower)``, the layout pass's value, so both
+    layouts give the same bits). Writes ``lam``, ``eta``, ``residual`` (``eta1 - eta2``),
+    ``beta``, ``sc1``, ``sc2`` (the support scales ``sqrt(x'S x) / |x|``) as (n,) and
     ``alpha``, ``normal``, ``grad`` (``d eta / d mu1``) as (3, n). Returns the number of
-    pairs whose Newton iteration ran ``max_newton`` steps without converging.
+    pairs whose Newton iteration ran ``max_newton`` steps without converging, or
+    ``-1 - p`` when pair ``p`` (batch first) fails its checks.
 
     Pairs go in blocks of :data:`_BLOCK`: the Newton coefficients of each pair of the block,
-    then sweeps of one Newton step for each pair still iterating, then each pair's
-    separator. Each pair sees the same operations in the same order as when it was solved
-    alone (so the same bits); a sweep's consecutive steps belong to independent pairs, so
-    the processor overlaps their chains of exp, log and divisions, which one pair's
-    iteration leaves waiting on each other (12 % less time on 10,000 pairs).
+    then sweeps of one Newton step (:func:`_newton_step`) for each pair still iterating,
+    then each pair's separator. Each pair sees the same operations in the same order as
+    when it was solved alone (so the same bits); a sweep steps four independent pairs in a
+    row, so the processor overlaps their chains of ``exp``, ``log`` and divisions, which
+    one pair's iteration leaves waiting on each other (docs/PERFORMANCE.md).
     """
     n = m1.shape[0] if batch_first else m1.shape[1]
     stalled = 0
@@ -83,15 +147,18 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton, batch_first,
         size = min(_BLOCK, n - start)
         for k in range(size):
             p = start + k
-            if batch_first:
-                a, d, f = s1[p, 0, 0], s1[p, 1, 1], s1[p, 2, 2]
-                b, c = 0.5 * (s1[p, 0, 1] + s1[p, 1, 0]), 0.5 * (s1[p, 0, 2] + s1[p, 2, 0])
-                e = 0.5 * (s1[p, 1, 2] + s1[p, 2, 1])
-                aa, dd, ff = s2[p, 0, 0], s2[p, 1, 1], s2[p, 2, 2]
-                bb, cc = 0.5 * (s2[p, 0, 1] + s2[p, 1, 0]), 0.5 * (s2[p, 0, 2] + s2[p, 2, 0])
-                ee = 0.5 * (s2[p, 1, 2] + s2[p, 2, 1])
+            if batch_first:     # as given: checked here, symmetrised as the layout pass does
+                ok1, a, b, c, d, e, f = _checked_covariance(s1[p, 0, 0], s1[p, 0, 1], s1[p, 0, 2], s1[p, 1, 0],
+                                                            s1[p, 1, 1], s1[p, 1, 2], s1[p, 2, 0], s1[p, 2, 1],
+                                                            s1[p, 2, 2])
+                ok2, aa, bb, cc, dd, ee, ff = _checked_covariance(s2[p, 0, 0], s2[p, 0, 1], s2[p, 0, 2], s2[p, 1, 0],
+                                                                  s2[p, 1, 1], s2[p, 1, 2], s2[p, 2, 0], s2[p, 2, 1],
+                                                                  s2[p, 2, 2])
                 mx, my, mz = m1[p, 0], m1[p, 1], m1[p, 2]
-                dx, dy, dz = m2[p, 0] - mx, m2[p, 1] - my, m2[p, 2] - mz
+                nx, ny, nz = m2[p, 0], m2[p, 1], m2[p, 2]
+                if not (ok1 and ok2 and ((mx - mx) + (my - my) + (mz - mz) + (nx - nx) + (ny - ny) + (nz - nz)) == 0.0):
+                    return -1 - p
+                dx, dy, dz = nx - mx, ny - my, nz - mz
             else:
                 a, b, c = s1[0, 0, p], s1[0, 1, p], s1[0, 2, p]
                 d, e, f = s1[1, 1, p], s1[1, 2, p], s1[2, 2, p]
@@ -157,45 +224,29 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton, batch_first,
             us[k] = 0.5 * (math.log(det2) - math.log(det1)) / 3.0
             los[k], his[k] = -math.inf, math.inf
             active[k] = k
-        # Newton on phi(u), safeguarded by the bracket [lo, hi] the signs of phi have shown:
-        # one step for each pair still iterating per sweep (a pair stops after its first step
-        # below u_tol, relative), so consecutive steps belong to independent pairs
+        # Newton, one step for each pair still iterating per sweep, four pairs at a time: their
+        # steps are independent, so the processor overlaps their chains of exp, log and divisions
         left = size
         for _ in range(max_newton):
             kept = 0
-            for j in range(left):
+            j = 0
+            while j + 4 <= left:
+                k0, k1, k2, k3 = active[j], active[j + 1], active[j + 2], active[j + 3]
+                more0 = _newton_step(coef, us, los, his, k0, u_tol)
+                more1 = _newton_step(coef, us, los, his, k1, u_tol)
+                more2 = _newton_step(coef, us, los, his, k2, u_tol)
+                more3 = _newton_step(coef, us, los, his, k3, u_tol)
+                for k, more in ((k0, more0), (k1, more1), (k2, more2), (k3, more3)):
+                    if more:
+                        active[kept] = k      # kept <= j: a slot already read
+                        kept += 1
+                j += 4
+            while j < left:
                 k = active[j]
-                u, lo, hi = us[k], los[k], his[k]
-                c41, c42, c31, c32, c21, c22 = coef[k, 0], coef[k, 1], coef[k, 2], coef[k, 3], coef[k, 4], coef[k, 5]
-                c11, c12, c01, c02 = coef[k, 6], coef[k, 7], coef[k, 8], coef[k, 9]
-                g31, g32, g21, g22 = coef[k, 10], coef[k, 11], coef[k, 12], coef[k, 13]
-                g11, g12, g01, g02 = coef[k, 14], coef[k, 15], coef[k, 16], coef[k, 17]
-                t = math.exp(u)
-                val1, val2 = c41 * t + c31, c42 * t + c32
-                der1, der2 = g31 * t + g21, g32 * t + g22
-                val1, val2 = val1 * t + c21, val2 * t + c22
-                der1, der2 = der1 * t + g11, der2 * t + g12
-                val1, val2 = val1 * t + c11, val2 * t + c12
-                der1, der2 = der1 * t + g01, der2 * t + g02
-                val1, val2 = val1 * t + c01, val2 * t + c02
-                phi = 2.0 * u + math.log(val1 / val2)
-                dphi = 2.0 + t * (der1 / val1 - der2 / val2)
-                if phi < 0.0:
-                    lo = max(lo, u)
-                if phi > 0.0:
-                    hi = min(hi, u)
-                step = -phi / dphi
-                new_u = u + step
-                if math.isfinite(lo) and math.isfinite(hi):
-                    slack = 1e-12 * (1.0 + abs(u))
-                    if new_u < lo - slack or new_u > hi + slack:
-                        new_u = 0.5 * (lo + hi)
-                else:
-                    new_u = u + min(max(step, -4.0), 4.0)
-                us[k], los[k], his[k] = new_u, lo, hi
-                if abs(new_u - u) > u_tol * max(1.0, abs(u)):
-                    active[kept] = k      # kept <= j: a slot already read
+                if _newton_step(coef, us, los, his, k, u_tol):
+                    active[kept] = k
                     kept += 1
+                j += 1
             left = kept
             if left == 0:
                 break
@@ -242,6 +293,36 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton, batch_first,
     return stalled
 
 
+def _checked_pairs_signature(t):
+    """A batch (n, 3, 3) in, its (3, 3, n) components out; returns an int."""
+    return t.int64(jit.readonly(t, 3), t.float64[:, :, ::1])
+
+
+@jit.lazy(_checked_pairs_signature)
+def _checked_pairs3(c, s):
+    """Check and lay out ``n`` covariances ``c`` (n, 3, 3) as symmetrised components ``s`` (3, 3, n).
+
+    Each by :func:`_checked_covariance` (the checks of ``overlap.CovariancePairs.from_arrays``,
+    with its arithmetic). Returns -1 when every matrix passes, else the index of the first
+    that does not.
+    """
+    for k in range(c.shape[0]):
+        ok, a, b, cc, d, e, f = _checked_covariance(c[k, 0, 0], c[k, 0, 1], c[k, 0, 2], c[k, 1, 0], c[k, 1, 1],
+                                                    c[k, 1, 2], c[k, 2, 0], c[k, 2, 1], c[k, 2, 2])
+        if not ok:
+            return k
+        s[0, 0, k], s[1, 1, k], s[2, 2, k] = a, d, f
+        s[0, 1, k], s[1, 0, k], s[0, 2, k], s[2, 0, k], s[1, 2, k], s[2, 1, k] = b, b, cc, cc, e, e
+    return -1
+
+
+def checked_pairs3(c: np.ndarray) -> np.ndarray | None:
+    """:func:`_checked_pairs3` on a float64 batch ``c`` (n, 3, 3), square metres: its (3, 3, n)
+    symmetrised components, or None when a matrix is not finite, symmetric and positive definite."""
+    s = np.empty((3, 3, c.shape[0]))
+    return s if _checked_pairs3()(np.ascontiguousarray(c, dtype=float), s) < 0 else None
+
+
 def _shared_pairs_signature(t):
     """One batch (N, 3, 3) and P batches (P, N, 3, 3) in, (3, 3, P N) components out."""
     w3 = t.float64[:, :, ::1]
@@ -282,21 +363,17 @@ def shared_pairs3(c1: np.ndarray, c2: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
-            u_tol: float, max_newton: int, batch_first: bool = False) -> tuple[np.ndarray, int]:
+            u_tol: float, max_newton: int) -> tuple[np.ndarray, int]:
     """The separator fields of ``n`` validated 3-D pairs, and how many pairs did not converge.
 
     Parameters
     ----------
-    m1, m2 : (3, n) arrays, or (n, 3) with ``batch_first``
+    m1, m2 : (3, n) arrays
         Means, metres (any frame, the same for both).
-    s1, s2 : (3, 3, n) arrays, or (n, 3, 3) with ``batch_first``
-        Validated positive definite covariances, square metres: symmetric components, or
-        with ``batch_first`` matrices symmetric to the checks' tolerance (the kernel
-        symmetrises them as it reads them).
+    s1, s2 : (3, 3, n) arrays
+        Validated symmetric positive definite covariances, square metres.
     u_tol, max_newton : float, int
         Newton's relative step tolerance in ``u = log t`` and its step cap.
-    batch_first : bool
-        The layout of the inputs (the outputs are batch last either way).
 
     Returns
     -------
@@ -308,8 +385,29 @@ def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
     stalled : int
         Pairs whose iteration hit ``max_newton`` steps.
     """
+    fields, stalled = _run(m1, m2, s1, s2, u_tol, max_newton, False)
+    return fields, stalled
+
+
+def minmax3_as_given(m1: np.ndarray, m2: np.ndarray, c1: np.ndarray, c2: np.ndarray,
+                     u_tol: float, max_newton: int) -> tuple[np.ndarray, int] | None:
+    """:func:`minmax3` of ``n`` unchecked pairs given batch first, or None when one is not usable.
+
+    ``m1``, ``m2`` (n, 3) means in metres and ``c1``, ``c2`` (n, 3, 3) covariances in square
+    metres, as a caller of ``overlap.minmax`` gives them: the kernel checks each pair as it
+    reads it (finite means; :func:`_checked_covariance`) and symmetrises the covariances as
+    the layout pass does, so a usable batch gives :func:`minmax3`'s bits without a
+    batch-last copy of the inputs. None at the first pair that fails (the caller's numpy
+    checks then word the error).
+    """
+    fields, stalled = _run(m1, m2, c1, c2, u_tol, max_newton, True)
+    return None if stalled < 0 else (fields, stalled)
+
+
+def _run(m1, m2, s1, s2, u_tol: float, max_newton: int, batch_first: bool) -> tuple[np.ndarray, int]:
     out = np.empty((15, m1.shape[0] if batch_first else m1.shape[1]))
-    stalled = _minmax3()(np.ascontiguousarray(m1), np.ascontiguousarray(m2), np.ascontiguousarray(s1),
-                          np.ascontiguousarray(s2), float(u_tol), int(max_newton), bool(batch_first),
+    stalled = _minmax3()(np.ascontiguousarray(m1, dtype=float), np.ascontiguousarray(m2, dtype=float),
+                          np.ascontiguousarray(s1, dtype=float), np.ascontiguousarray(s2, dtype=float),
+                          float(u_tol), int(max_newton), bool(batch_first),
                           out[0], out[1], out[2], out[6:9], out[3], out[9:12], out[4], out[5], out[12:15])
     return out, int(stalled)

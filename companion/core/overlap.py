@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
-from companion.core import covariance_checks, jit, minmax_kernel
+from companion.core import jit, minmax_kernel
 from companion.core import small_matrix as K
 from companion.errors import InputError
 
@@ -240,7 +240,7 @@ class CovariancePairs:
             # 3-D: one compiled pass checks (finite, symmetric, positive definite), symmetrises and
             # lays out (the same tests, the same bits); a matrix it rejects sends the batch
             # through numpy, which words the error
-            comp = covariance_checks.checked_pairs3(full.reshape(-1, 3, 3)) if d == 3 and jit.available() else None
+            comp = minmax_kernel.checked_pairs3(full.reshape(-1, 3, 3)) if d == 3 and jit.available() else None
             if comp is None:
                 _require_finite(name, arr)
                 comp = _symmetrised_components(name, K.matrices_to_components(full))
@@ -385,13 +385,13 @@ def minmax(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> 
 def _minmax_batch_first3(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: ArrayLike) -> MinmaxResult | None:
     """:func:`minmax` of 3-D pairs given with one leading shape, by the compiled kernel on the arrays as given.
 
-    No broadcasting and no copies into the batch-last layout: the means and covariances are
-    checked in place (the checks of :func:`_validate_pair`, read-only) and the kernel reads
-    them batch first, symmetrising as it reads (the same bits as the general path). On
-    10,000 pairs this halves the memory the call touches, and with it the page faults a
-    fresh allocation of the layout costs. ``None`` when this does not apply (no numba,
-    another dimension, leading shapes that differ) or a check fails: then the general path
-    runs, and words the error.
+    No broadcasting and no copies into the batch-last layout: the kernel reads the means
+    and covariances batch first, checking each pair as it reads it (the checks of
+    :func:`_validate_pair`) and symmetrising as the layout pass does (the same bits as the
+    general path). On 10,000 pairs this halves the memory the call touches, and with it
+    the page faults a fresh allocation of the layout costs. ``None`` when this does not
+    apply (no numba, another dimension, leading shapes that differ) or a check fails: then
+    the general path runs, and words the error.
     """
     if not jit.available():
         return None
@@ -400,12 +400,9 @@ def _minmax_batch_first3(mu1: ArrayLike, cov1: ArrayLike, mu2: ArrayLike, cov2: 
             and c1.shape == m1.shape + (3,) and c2.shape == c1.shape):
         return None
     lead = m1.shape[:-1]
-    m1, m2 = m1.reshape(-1, 3), m2.reshape(-1, 3)
-    c1, c2 = c1.reshape(-1, 3, 3), c2.reshape(-1, 3, 3)
-    if not (np.isfinite(m1).all() and np.isfinite(m2).all()
-            and covariance_checks.valid_pairs3(c1) and covariance_checks.valid_pairs3(c2)):
-        return None
-    return _compiled_result(*minmax_kernel.minmax3(m1, m2, c1, c2, _U_TOL, _MAX_NEWTON, batch_first=True), lead)
+    done = minmax_kernel.minmax3_as_given(m1.reshape(-1, 3), m2.reshape(-1, 3), c1.reshape(-1, 3, 3),
+                                          c2.reshape(-1, 3, 3), _U_TOL, _MAX_NEWTON)
+    return None if done is None else _compiled_result(*done, lead)
 
 
 def _compiled_result(fields: Array, stalled: int, lead: tuple[int, ...]) -> MinmaxResult:

@@ -265,6 +265,8 @@ def _spoil(rng: np.random.Generator, batches: list[np.ndarray], tolerance: float
         elif kind == 1:
             c[k, r, q] += rng.choice([0.5, 0.999, 1.001, 2.0]) * tolerance * np.max(np.abs(c[k]))
         elif kind == 2:
+            if not np.isfinite(c[k]).all():     # spoilt already: no eigenvalues to move
+                continue
             w, v = np.linalg.eigh(0.5 * (c[k] + c[k].T))
             w *= rng.permutation([(1.0, 1.0, 0.0), (1.0, 1.0, -1.0), (-1.0, -1.0, 1.0), (1.0, 1.0, 1e-14)][rng.integers(4)])
             c[k] = (v * w) @ v.T
@@ -308,6 +310,35 @@ def test_that_the_compiled_covariance_checks_give_the_numpy_bits_and_errors(seed
 
     compiled, reference = _compiled_and_numpy(pairs)
     assert compiled == reference
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1))
+def test_that_minmax_checks_pairs_given_batch_first_as_the_numpy_checks_do(seed):
+    """The kernel checks pairs given batch first as it reads them: it refuses exactly the
+    batches the numpy checks refuse (NaN or infinite means or entries, asymmetry and minors
+    on both sides of the tests' edges), and ``minmax`` then words the same error."""
+    _require_compiled()
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 150))
+    c1, c2 = _random_covariances(rng, n, 2.0), _random_covariances(rng, n, 3.0)
+    c1 *= 1.0 + 1e-12 * rng.standard_normal(c1.shape)      # the last bits asymmetric
+    mu1, mu2 = rng.standard_normal((n, 3)), rng.standard_normal((n, 3))
+    bad = (np.nan, np.inf, -np.inf)[rng.integers(3)]
+    spoil = rng.integers(4)     # one kind of fault (or none) per example, so that each check decides alone
+    if spoil == 0:
+        _spoil(rng, [c1, c2], 1e-9)
+    elif spoil == 1:            # a diagonal entry, which _spoil leaves finite
+        i = rng.integers(3)
+        (c1, c2)[rng.integers(2)][rng.integers(n), i, i] = bad
+    elif spoil == 2:
+        (mu1, mu2)[rng.integers(2)][rng.integers(n), rng.integers(3)] = bad
+    # the reference: the numpy checks (the general path's compiled pass shares the kernel's)
+    with _numba_unimportable():
+        refused = _outcome(lambda: overlap._validate_pair(mu1, c1, mu2, c2))
+    refused = refused if isinstance(refused, str) else None
+    assert (overlap._minmax_batch_first3(mu1, c1, mu2, c2) is None) == (refused is not None)
+    assert _outcome(lambda: overlap.minmax(mu1, c1, mu2, c2) and None) == refused
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
