@@ -370,6 +370,23 @@ def test_that_warm_up_loads_every_registered_kernel():
         assert compiled.cache_info().currsize == 1
 
 
+def test_that_an_inline_helper_is_compiled_into_its_callers_and_stays_python_in_its_module():
+    """``jit.inline``: the compiled function calls the helper's numba version (a copy of the
+    caller's globals holds it); the module keeps the plain function, which answers the same."""
+    from companion.core import minmax_kernel
+
+    _require_compiled()
+    jit.warm_up()
+    helper = minmax_kernel._checked_covariance
+    assert type(helper).__name__ == "function" and helper.__jit_inline__
+    entries = (2.0, 0.3, 0.1, 0.3 + 1e-12, 1.0, 0.2, 0.1, 0.2, 0.5)
+    assert helper(*entries) == (True, 2.0, 0.5 * (0.3 + 0.3 + 1e-12), 0.1, 1.0, 0.2, 0.5)
+    assert helper(*entries[:8], -0.5)[0] is False
+    s = np.empty((3, 3, 1))
+    assert minmax_kernel._checked_pairs3()(np.array(entries).reshape(1, 3, 3), s) == -1
+    assert s[0, 1, 0] == s[1, 0, 0] == 0.5 * (0.3 + 0.3 + 1e-12)
+
+
 def test_that_a_numba_that_does_not_import_leaves_the_numpy_code_with_the_same_answers(request, caplog):
     rng = np.random.default_rng(5)
     covs = _random_covariances(rng, 8, 2.0)
