@@ -38,8 +38,8 @@ import numpy as np
 from companion.core import jit
 
 
-#: Pairs per block: the block's coefficients, Newton state and active list (about 11 kB)
-#: stay in the first-level cache.
+#: Pairs per block: the block's coefficients, inputs, Newton state and active list (about
+#: 21 kB) stay in the first-level cache.
 _BLOCK = 64
 
 
