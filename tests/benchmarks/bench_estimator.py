@@ -142,6 +142,7 @@ def run() -> list[dict]:
         {
             "name": f"tracker cycle: update {TRACKS} tracks + predict all N={HORIZON} (median)",
             "value": float(np.median(cycle)) * 1e3, "unit": "ms", "target": "<= 0.4 ms",
+            "peer": f"filterpy floor {floor_ms:.3f} ms", "ratio": float(np.median(cycle)) * 1e3 / floor_ms,
             "note": f"{CYCLES} cycles; p95 {np.percentile(cycle, 95) * 1e3:.3f} ms; shared CPU, noisy; "
                     f"floor with filterpy (its bare predict + update and the prediction, x {TRACKS}) {floor_ms:.3f} ms",
         },
