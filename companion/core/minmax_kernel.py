@@ -26,7 +26,10 @@ Why numba (a runtime dependency): it installs from a wheel with no compile step 
 install; :mod:`companion.core.jit` says when the kernel is compiled or loaded. Without numba
 the numpy kernel runs.
 
-Inputs are validated by the caller (:class:`companion.core.overlap.CovariancePairs`).
+Inputs laid out batch last are validated by the caller
+(:class:`companion.core.overlap.CovariancePairs`, whose 3-D checks and layout are
+:func:`checked_pairs3` here); pairs given batch first, as to ``overlap.minmax``, are checked
+by the kernel as it reads them (:func:`minmax3_as_given`), with the same helper.
 """
 
 from __future__ import annotations
@@ -231,12 +234,12 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton, batch_first,
             kept = 0
             j = 0
             while j + 4 <= left:
-                k0, k1, k2, k3 = active[j], active[j + 1], active[j + 2], active[j + 3]
-                more0 = _newton_step(coef, us, los, his, k0, u_tol)
-                more1 = _newton_step(coef, us, los, his, k1, u_tol)
-                more2 = _newton_step(coef, us, los, his, k2, u_tol)
-                more3 = _newton_step(coef, us, los, his, k3, u_tol)
-                for k, more in ((k0, more0), (k1, more1), (k2, more2), (k3, more3)):
+                ka, kb, kc, kd = active[j], active[j + 1], active[j + 2], active[j + 3]
+                more_a = _newton_step(coef, us, los, his, ka, u_tol)
+                more_b = _newton_step(coef, us, los, his, kb, u_tol)
+                more_c = _newton_step(coef, us, los, his, kc, u_tol)
+                more_d = _newton_step(coef, us, los, his, kd, u_tol)
+                for k, more in ((ka, more_a), (kb, more_b), (kc, more_c), (kd, more_d)):
                     if more:
                         active[kept] = k      # kept <= j: a slot already read
                         kept += 1
