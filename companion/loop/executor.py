@@ -123,7 +123,8 @@ class Executor:
             return self.command.copy()
         if self.plan is None:
             return np.asarray(estimated_velocity, dtype=float).copy()
-        return self._lag.velocity_at(self.plan.initial_velocity, self.plan.commands, t_v - self.plan_t0_v)
+        return self._lag.velocity_at(self.plan.initial_velocity, self.plan.commands, t_v - self.plan_t0_v,
+                                   self.plan.initial_response_state)
 
     def displacement(self, t_from_v: float, t_to_v: float, estimated_velocity: np.ndarray) -> np.ndarray:
         """How far the drone moves from vehicle time ``t_from_v`` to ``t_to_v`` (NED m): along the
@@ -154,5 +155,5 @@ class Executor:
         if self.plan is None:
             return None
         dt = t_v - self.plan_t0_v
-        velocity = self._lag.velocity_at(self.plan.initial_velocity, self.plan.commands, dt)
+        velocity = self._lag.velocity_at(self.plan.initial_velocity, self.plan.commands, dt, self.plan.initial_response_state)
         return self._plan_position(dt), np.asarray(velocity, dtype=float)

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from companion.errors import ConfigError
+from companion.errors import ConfigError, InputError
 from companion.core.planner import Planner, PlannerConfig, PlanRequest
 from companion.core.planner.vehicle_model import LagModel
 
@@ -99,13 +99,16 @@ from companion.core.planner.vehicle_model import AxisResponse, ResponseModel  # 
 PX4_LIKE = (AxisResponse(1.5, 0.33, 0.8, 0.22), AxisResponse(3.2, 0.14, 0.5, 0.02))
 
 
-def _simulate_response(p0, v0, commands, step_s, axes, substeps=600):
-    """Euler-integrated PI loop + acceleration lag + drag, from the steady state at ``v0``."""
+def _simulate_response(p0, v0, commands, step_s, axes, substeps=600, internal=None):
+    """Euler-integrated PI loop + acceleration lag + drag, from the steady state at ``v0``
+    (or from ``v0`` with the integral and acceleration ``internal`` (3, 2))."""
     dt = step_s / substeps
     positions, velocities = [], []
     p, v = np.array(p0, dtype=float), np.array(v0, dtype=float)
     kp, ki, k, ta = (np.array([getattr(axes[i], f) for i in (0, 0, 1)]) for f in AxisResponse.FIELDS)
     xi, a = np.where(ki > 0, k * v / np.where(ki > 0, ki, 1.0), 0.0), k * v
+    if internal is not None:
+        xi, a = np.array(internal, dtype=float).T.copy()
     for u in commands:
         for _ in range(substeps):
             e = u - v
@@ -134,6 +137,34 @@ def test_that_the_response_model_predicts_what_an_integrated_pi_loop_vehicle_fli
     np.testing.assert_allclose(p0 + np.cumsum(inc, axis=0), model.positions(p0, v0, commands), atol=1e-12)
 
 
+def test_that_the_response_model_predicts_a_vehicle_whose_loop_has_not_settled():
+    """Started from a wound-up integral (the cruise's drag still held at rest) instead of the
+    steady state: positions, velocities, the QP's increment form and velocity_at all follow
+    the integrated vehicle, and with no internal state given the steady state is used, bit for bit."""
+    rng = np.random.default_rng(4)
+    model = ResponseModel(0.3, *PX4_LIKE)
+    p0, v0 = rng.normal(size=3), np.array([0.1, -0.2, 0.05])
+    internal = np.array([[4.0, 1.2], [-1.0, -0.3], [0.5, 0.1]])    # xi m, a m/s^2 per axis
+    commands = rng.normal(size=(8, 3))
+    positions, velocities = _simulate_response(p0, v0, commands, 0.3, PX4_LIKE, internal=internal)
+    np.testing.assert_allclose(model.positions(p0, v0, commands, internal), positions, atol=5e-3)
+    np.testing.assert_allclose(model.simulate(v0, commands, internal)[1], velocities, atol=5e-3)
+    np.testing.assert_allclose(model.velocity_at(v0, commands, 0.3 * 5, internal), velocities[4], atol=5e-3)
+    h, f = model.increment_coefficients(8), model.free_increments(v0, 8, internal)
+    inc = f + np.array([sum(h[k] * commands[i - k] for k in range(i + 1)) for i in range(8)])
+    np.testing.assert_allclose(p0 + np.cumsum(inc, axis=0), model.positions(p0, v0, commands, internal), atol=1e-12)
+    # the wound-up integral is not the steady state: it flies elsewhere
+    assert np.abs(model.positions(p0, v0, commands) - positions).max() > 0.1
+    steady = np.array([model.axes[k].steady_state(v0[k])[2:] for k in range(3)])
+    assert model.positions(p0, v0, commands, steady).tobytes() == model.positions(p0, v0, commands).tobytes()
+
+
+def test_that_the_lag_model_refuses_an_internal_state():
+    lag = LagModel.from_time_constant(0.3, 0.4)
+    with pytest.raises(ValueError, match="no internal state"):
+        lag.positions(np.zeros(3), np.zeros(3), np.zeros((4, 3)), np.zeros((3, 2)))
+
+
 def test_that_a_first_order_response_flies_like_the_lag_it_is():
     """K_p = 1/T alone is the lag: the same commands give the same positions as LagModel."""
     lag = LagModel.from_time_constant(0.3, 0.4)
@@ -158,6 +189,40 @@ def test_that_a_plan_with_the_response_model_obeys_it():
     flown, _ = _simulate_response(req.position, req.velocity, plan.commands, tau, PX4_LIKE, substeps=300)
     np.testing.assert_allclose(flown, plan.positions, atol=1e-2)
     assert np.linalg.norm(plan.positions[-1] - req.target) < np.linalg.norm(req.target)
+
+
+def test_that_a_plan_from_an_unsettled_loop_obeys_the_model_from_that_state():
+    n, tau = 20, 0.3
+    cfg = PlannerConfig(horizon_steps=n, step_s=tau, vehicle_response=PX4_LIKE, accel_max_mps2=(1.0, 1.0, 1.0))
+    internal = np.array([[2.5, 0.8], [0.0, 0.0], [0.0, 0.0]])       # still pushing north, at rest
+    kwargs = dict(position=np.zeros(3), velocity=np.zeros(3),
+                  drone_covs=np.broadcast_to(0.02 * np.eye(3), (n, 3, 3)), target=np.zeros(3))
+    planner = Planner(cfg)
+    plan = planner.solve(PlanRequest(**kwargs, response_state=internal))
+    assert plan.status == "optimal"
+    model = ResponseModel(tau, *PX4_LIKE)
+    np.testing.assert_allclose(plan.positions, model.positions(np.zeros(3), np.zeros(3), plan.commands, internal), atol=1e-3)
+    np.testing.assert_array_equal(plan.initial_response_state, internal)
+    # to hold the target against the push the first command pulls south; from the steady state
+    # the plan just hovers, and flown from the real (unsettled) state that drifts further north
+    assert plan.commands[0, 0] < -0.05
+    settled = planner.solve(PlanRequest(**kwargs))
+    assert np.abs(settled.commands).max() < 1e-3 and settled.initial_response_state is None
+    drifted = model.positions(np.zeros(3), np.zeros(3), settled.commands, internal)
+    assert np.abs(drifted[:, 0]).max() > 2.0 * np.abs(plan.positions[:, 0]).max()
+
+
+def test_that_a_response_state_is_checked_and_needs_a_response_model():
+    n = 5
+    kwargs = dict(position=np.zeros(3), velocity=np.zeros(3),
+                  drone_covs=np.broadcast_to(0.02 * np.eye(3), (n, 3, 3)), target=np.ones(3))
+    with pytest.raises(InputError, match=r"response_state has shape \(3,\), expected \(3, 2\)"):
+        PlanRequest(**kwargs, response_state=np.zeros(3))
+    with pytest.raises(InputError, match="response_state contains NaN"):
+        PlanRequest(**kwargs, response_state=np.full((3, 2), np.nan))
+    lag_planner = Planner(PlannerConfig(horizon_steps=n, velocity_time_constant_s=0.3))
+    with pytest.raises(InputError, match="response_state needs a response model"):
+        lag_planner.solve(PlanRequest(**kwargs, response_state=np.zeros((3, 2))))
 
 
 def test_that_a_bad_vehicle_response_table_names_the_key():

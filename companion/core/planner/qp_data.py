@@ -277,7 +277,7 @@ def _elementwise_numpy(template: RequestTemplate, request: PlanRequest, m: np.nd
         a_slot[layout.slot["wall_p"].slice].reshape(layout.W, N, 3)[:] = request.walls_normal[:, None, :]
     # bounds: the template's, with V_0 and p_0 of this request (the walls' are written by build)
     l, u = template.l.copy(), template.u.copy()
-    dyn = layout.lag.free_increments(v0, N)           # p_1 - b V_1 = p_0 + c V_0 for the lag
+    dyn = layout.lag.free_increments(v0, N, request.response_state)   # p_1 - b V_1 = p_0 + c V_0 for the lag
     dyn[0] += request.position
     l[layout.row["dyn"].slice] = u[layout.row["dyn"].slice] = dyn.ravel()
     if layout.lag.bounds_command_steps:       # else a response model: the autopilot limits acceleration

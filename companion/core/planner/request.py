@@ -92,6 +92,12 @@ class PlanRequest:
         and walls) at every step, not in the cost's Mahalanobis metric. It stands for how far
         the vehicle strays from a plan before the next replan, which the estimate's
         covariance does not carry; ``safety_covs`` is the sum.
+    response_state : (3, 2) array, optional
+        The vehicle response's internal state at the start, per NED axis: the velocity
+        loop's error integral ``xi`` (m) and the acceleration ``a`` (m/s^2) of
+        :class:`~companion.core.planner.vehicle_model.AxisResponse` (``a`` unused on an axis
+        without an acceleration lag). Only with a response model; ``None`` starts from the
+        steady state at ``velocity`` (the integral holding the drag of that speed).
     """
 
     position: np.ndarray
@@ -105,6 +111,7 @@ class PlanRequest:
     walls_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
     upper_bound_mask: np.ndarray | None = None
     margin_cov: np.ndarray | None = None
+    response_state: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -159,6 +166,8 @@ class PlanRequest:
             _check_covariances("margin_cov", margin[None] + np.eye(3)[None] * 1e-12)   # PSD: zero is allowed
             set_("margin_cov", margin)
             set_("safety_covs", _array("safety_covs", covs + margin, (n, 3, 3)))
+        if self.response_state is not None:
+            set_("response_state", _array("response_state", self.response_state, (3, 2)))
 
     @cached_property
     def covariance_pairs(self) -> CovariancePairs:
@@ -214,6 +223,9 @@ class Plan:
     initial_velocity : (3,) array
         ``V_0``: the vehicle velocity the plan starts from (the request's, clipped to
         what the bounds can hold), NED m/s.
+    initial_response_state : (3, 2) array or None
+        The response model's internal state the plan starts from (the request's
+        ``response_state``; ``None``: the steady state at ``initial_velocity``).
     positions : (N, 3) array
         Planned positions ``p_1..p_N``, NED metres.
     eta : (P, N) array
@@ -270,6 +282,7 @@ class Plan:
     notes: tuple[str, ...] = ()
     work: int = 0
     admm_iterations: int = 0
+    initial_response_state: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:

@@ -46,7 +46,7 @@ from companion.core.planner.qp_data import RequestData, RequestTemplate
 from companion.core.planner.qp_layout import QpLayout
 from companion.core.planner.qp_step import SLACK_TOL, QpStep, QpWorkspace, solve_qp
 from companion.core.planner.request import Plan, PlanRequest
-from companion.core.planner.vehicle_model import model_from_config
+from companion.core.planner.vehicle_model import ResponseModel, model_from_config
 from companion.errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -151,7 +151,7 @@ class Planner:
         data = RequestData.build(ws.template, form, request, y_warm)
         ws.start(data)
         v_bar = self.initial_velocities(request, data.v0, warm_start)
-        p_bar = self.lag.positions(request.position, data.v0, v_bar)
+        p_bar = self.lag.positions(request.position, data.v0, v_bar, request.response_state)
         lam_bar = form.initial_lam(request, p_bar)
         v_start = v_bar
         budget = WorkBudget(cfg.replan_work_budget)
@@ -205,7 +205,7 @@ class Planner:
         data = RequestData.build(ws.template, self.formulation, request)
         ws.start(data)
         v_bar = np.asarray(velocities, dtype=float)
-        p_bar = self.lag.positions(request.position, data.v0, v_bar)
+        p_bar = self.lag.positions(request.position, data.v0, v_bar, request.response_state)
         if self.formulation.carries_lam and lam is None:
             lam = self.formulation.initial_lam(request, p_bar)
         unbudgeted = WorkBudget(UNBUDGETED_WORK)     # one QP for a cross-check, not a replan
@@ -261,6 +261,9 @@ class Planner:
         if request.horizon_steps != self.config.horizon_steps:
             raise InputError(f"request has {request.horizon_steps} steps, the planner is configured "
                              f"for horizon_steps = {self.config.horizon_steps}")
+        if request.response_state is not None and not isinstance(self.lag, ResponseModel):
+            raise InputError("response_state needs a response model ([planner] vehicle_response); "
+                             "this planner models a velocity lag")
         key = (request.horizon_steps, request.num_obstacles, request.num_walls)
         if key not in self._workspaces:
             layout = QpLayout(*key, paper=self.formulation.carries_lam, upper=self.formulation.has_upper,
@@ -274,7 +277,7 @@ class Planner:
         cfg = self.config
         if step is None:
             velocities = v_bar
-            positions = self.lag.positions(request.position, data.v0, velocities)
+            positions = self.lag.positions(request.position, data.v0, velocities, request.response_state)
             slack_max, cost = np.inf, np.nan
         else:
             velocities, positions = step.velocities.copy(), step.positions.copy()
@@ -292,7 +295,7 @@ class Planner:
         if budget.exhausted and not ok and step is not None and slack_max <= SLACK_TOL:
             # the best safe iterate: the last QP's solution was not; the SCP's start (the
             # previous plan shifted, within the speed and acceleration bounds) may be
-            start = self.lag.positions(request.position, data.v0, v_start)
+            start = self.lag.positions(request.position, data.v0, v_start, request.response_state)
             figs_start, ok = self.formulation.recheck(request, start, data.in_range)
             if ok:
                 velocities, positions, figs = v_start.copy(), start, figs_start
@@ -325,6 +328,7 @@ class Planner:
             overlap=figs.overlap, wall_margin=figs.wall_margin, in_range=data.in_range.copy(), status=status,
             iterations=iterations, solve_time_s=time.perf_counter() - t0, slack_max=slack_max, cost=cost,
             formulation=cfg.formulation, notes=tuple(notes), work=budget.used, admm_iterations=budget.admm_iterations,
+            initial_response_state=request.response_state,
         )
         if status != "optimal":
             logger.info("plan %s after %d iterations (slack %.3g; %s)", status, iterations, slack_max, "; ".join(notes))

@@ -122,14 +122,20 @@ class LagModel:
         """``h_k`` (2, 3) of ``p_i - p_{i-1} = sum_k h_k V_{i-k}``: ``b`` on ``V_i``, ``c`` on ``V_{i-1}``, seconds."""
         return np.array([[self.b] * 3, [self.c] * 3])
 
-    def free_increments(self, v0: np.ndarray, n_steps: int) -> np.ndarray:
-        """Position increments (n_steps, 3) from ``v_0`` alone: ``c v_0`` in the first step, metres."""
+    def free_increments(self, v0: np.ndarray, n_steps: int, internal: np.ndarray | None = None) -> np.ndarray:
+        """Position increments (n_steps, 3) from ``v_0`` alone: ``c v_0`` in the first step, metres.
+
+        ``internal`` must be ``None``: the lag's only state is its velocity."""
+        _no_internal(internal)
         out = np.zeros((n_steps, 3))
         out[0] = self.c * np.asarray(v0, dtype=float)
         return out
 
-    def positions(self, p0: np.ndarray, v0: np.ndarray, velocities: np.ndarray) -> np.ndarray:
-        """Positions ``p_1..p_N`` (N, 3) from ``p_0`` (3,), ``v_0`` (3,) and ``V_1..V_N`` (N, 3)."""
+    def positions(self, p0: np.ndarray, v0: np.ndarray, velocities: np.ndarray,
+                  internal: np.ndarray | None = None) -> np.ndarray:
+        """Positions ``p_1..p_N`` (N, 3) from ``p_0`` (3,), ``v_0`` (3,) and ``V_1..V_N`` (N, 3)
+        (``internal`` must be ``None``)."""
+        _no_internal(internal)
         if jit.available():
             return self._compiled(p0, v0, velocities, None)[0]
         velocities, previous = _with_previous(v0, velocities)
@@ -155,11 +161,14 @@ class LagModel:
                     np.ascontiguousarray(np.zeros(3) if limit is None else limit, dtype=float), positions, commands)
         return positions, commands
 
-    def velocity_at(self, v0: np.ndarray, commands: np.ndarray, elapsed_s: float) -> np.ndarray:
+    def velocity_at(self, v0: np.ndarray, commands: np.ndarray, elapsed_s: float,
+                    internal: np.ndarray | None = None) -> np.ndarray:
         """Vehicle velocity (3,) ``elapsed_s`` seconds after ``v0`` (3,) under ``commands`` (N, 3).
 
-        Each command is held ``tau``; past the last step the last command is held.
+        Each command is held ``tau``; past the last step the last command is held
+        (``internal`` must be ``None``).
         """
+        _no_internal(internal)
         commands = np.asarray(commands, dtype=float)
         v = np.asarray(v0, dtype=float).copy()
         remaining = max(0.0, float(elapsed_s))
@@ -315,8 +324,15 @@ class ResponseModel:
         self._continuous = [ax.matrices() for ax in self.axes]
         self._discrete = [discretise(a, b, self.step_s) for a, b in self._continuous]
 
-    def _state0(self, v0: np.ndarray) -> list[np.ndarray]:
-        return [ax.steady_state(float(v)) for ax, v in zip(self.axes, np.asarray(v0, dtype=float))]
+    def _state0(self, v0: np.ndarray, internal: np.ndarray | None = None) -> list[np.ndarray]:
+        """Per axis the start state ``(0, v, xi[, a])``: the steady state at ``v0`` (3,), or
+        ``v0`` with the internal states ``internal`` (3, 2) (``xi`` m, ``a`` m/s^2 per axis;
+        ``a`` unused on an axis without an acceleration lag)."""
+        if internal is None:
+            return [ax.steady_state(float(v)) for ax, v in zip(self.axes, np.asarray(v0, dtype=float))]
+        internal = np.asarray(internal, dtype=float)
+        return [np.array([0.0, float(v), float(xi), float(a)][:self._discrete[k][0].shape[0]])
+                for k, (v, (xi, a)) in enumerate(zip(np.asarray(v0, dtype=float), internal))]
 
     def increment_coefficients(self, n_steps: int) -> np.ndarray:
         """``h_k`` (n_steps, 3): position increment of step ``i`` per m/s of command ``V_{i-k}``, seconds."""
@@ -330,37 +346,43 @@ class ResponseModel:
                 x = ad @ x
         return out
 
-    def free_increments(self, v0: np.ndarray, n_steps: int) -> np.ndarray:
-        """``f_i v_0`` (n_steps, 3): position increments from the initial state under zero commands, metres."""
+    def free_increments(self, v0: np.ndarray, n_steps: int, internal: np.ndarray | None = None) -> np.ndarray:
+        """``f_i v_0`` (n_steps, 3): position increments from the initial state under zero commands, metres
+        (the initial state: :meth:`_state0`)."""
         out = np.zeros((n_steps, 3))
-        for axis, ((ad, _), x) in enumerate(zip(self._discrete, self._state0(v0))):
+        for axis, ((ad, _), x) in enumerate(zip(self._discrete, self._state0(v0, internal))):
             for i in range(n_steps):
                 x_next = ad @ x
                 out[i, axis] = x_next[0] - x[0]
                 x = x_next
         return out
 
-    def simulate(self, v0: np.ndarray, commands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Position offsets and velocities (N, 3) at the step ends under ``commands`` (N, 3), from rest at ``v0``."""
+    def simulate(self, v0: np.ndarray, commands: np.ndarray,
+                 internal: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Position offsets and velocities (N, 3) at the step ends under ``commands`` (N, 3), from the
+        steady state at ``v0`` or from ``v0`` and ``internal`` (:meth:`_state0`)."""
         commands = np.asarray(commands, dtype=float)
         pos, vel = np.zeros(commands.shape), np.zeros(commands.shape)
-        for axis, ((ad, bd), x) in enumerate(zip(self._discrete, self._state0(v0))):
+        for axis, ((ad, bd), x) in enumerate(zip(self._discrete, self._state0(v0, internal))):
             for i, u in enumerate(commands[:, axis]):
                 x = ad @ x + bd * u
                 pos[i, axis], vel[i, axis] = x[0], x[1]
         return pos, vel
 
-    def positions(self, p0: np.ndarray, v0: np.ndarray, velocities: np.ndarray) -> np.ndarray:
-        """Positions ``p_1..p_N`` (N, 3) from ``p_0``, ``v_0`` and the commands ``V_1..V_N`` (N, 3)."""
-        return np.asarray(p0, dtype=float) + self.simulate(v0, velocities)[0]
+    def positions(self, p0: np.ndarray, v0: np.ndarray, velocities: np.ndarray,
+                  internal: np.ndarray | None = None) -> np.ndarray:
+        """Positions ``p_1..p_N`` (N, 3) from ``p_0``, ``v_0`` (and ``internal``) and the commands ``V_1..V_N`` (N, 3)."""
+        return np.asarray(p0, dtype=float) + self.simulate(v0, velocities, internal)[0]
 
     def commands(self, v0: np.ndarray, velocities: np.ndarray, limit: np.ndarray | None = None) -> np.ndarray:
         """The commands: the planner's variables themselves (N, 3), clipped to ``+-limit`` (3,) if given."""
         commands = np.asarray(velocities, dtype=float).copy()
         return commands if limit is None else np.clip(commands, -limit, limit)
 
-    def velocity_at(self, v0: np.ndarray, commands: np.ndarray, elapsed_s: float) -> np.ndarray:
-        """Vehicle velocity (3,) ``elapsed_s`` seconds after the steady state at ``v0`` under ``commands``.
+    def velocity_at(self, v0: np.ndarray, commands: np.ndarray, elapsed_s: float,
+                    internal: np.ndarray | None = None) -> np.ndarray:
+        """Vehicle velocity (3,) ``elapsed_s`` seconds after the start state (:meth:`_state0` of
+        ``v0`` and ``internal``) under ``commands``.
 
         Each command is held ``tau``; past the last step the last command is held.
         """
@@ -368,7 +390,7 @@ class ResponseModel:
         remaining = max(0.0, float(elapsed_s))
         full = min(int(remaining // self.step_s), len(commands) - 1)
         out = np.zeros(3)
-        for axis, ((ad, bd), (a, b), x) in enumerate(zip(self._discrete, self._continuous, self._state0(v0))):
+        for axis, ((ad, bd), (a, b), x) in enumerate(zip(self._discrete, self._continuous, self._state0(v0, internal))):
             for u in commands[:full, axis]:
                 x = ad @ x + bd * u
             rest = remaining - full * self.step_s
@@ -380,6 +402,12 @@ class ResponseModel:
 
 
 VehicleModel = LagModel | ResponseModel
+
+
+def _no_internal(internal: np.ndarray | None) -> None:
+    """The lag has no internal state: refuse one (a caller mixing up the models)."""
+    if internal is not None:
+        raise ValueError("the lag model has no internal state: internal must be None")
 
 
 def model_from_config(step_s: float, time_constant_s: float,
