@@ -256,7 +256,21 @@ class Companion:
             out.append(messages.position_velocity_setpoint(t_boot_ms, *reference, **target))
         else:
             out.append(messages.velocity_setpoint(t_boot_ms, command, **target))
+        self._tell_response_observer(t_s, seq.engaged, command)
         return out
+
+    def _tell_response_observer(self, t_s: float, engaged: bool, command: np.ndarray) -> None:
+        """The setpoint just sent, to the response observer (``[companion] response_state =
+        "observed"``): while engaged its velocity loop follows our setpoints; before, it is
+        the autopilot's own, so the observer starts afresh from the first report after."""
+        observer = self.perception.response
+        if observer is None:
+            return
+        t_v = self.perception.vehicle_time(t_s)
+        if not engaged or t_v is None:
+            observer.reset()
+            return
+        observer.command(t_v, command)
 
     def _clock_messages(self, t_s: float) -> Outbox:
         """This tick's TIMESYNC request to the autopilot (every ``1 / timesync_hz`` s), and the
@@ -362,6 +376,7 @@ class Companion:
             initial_velocity=v0,
             warm_start=self.executor.plan,
             lead_s=lead,
+            response_state=None if self.perception.response is None else self.perception.response.internal(t_v + lead),
             shift=self.executor.displacement(t_v, t_v + lead, velocity) if lead > 0.0 else None,
         )
         self._replans_asked += 1

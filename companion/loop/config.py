@@ -166,6 +166,12 @@ class LoopConfig:
         so that the estimate moves as planned (offset-free tracking of an EKF that corrects
         its position without its velocity; measured on PX4 SITL up to 0.5 m/s, docs/PX4.md).
         Not applied while the estimate is stale (the loop brakes to zero).
+    response_state : where each plan's response model starts its internal states (the velocity
+        loop's error integral and the acceleration, :class:`~companion.core.planner.vehicle_model.AxisResponse`):
+        ``"steady"`` (default) at their steady state at ``V_0``; ``"observed"`` from a Kalman filter
+        on the model fed with the velocity estimates and the setpoints sent
+        (:class:`~companion.core.planner.response_observer.ResponseObserver`). Needs
+        ``[planner] vehicle_response`` and ``setpoint_kind = "velocity"``.
     setpoint_kind : ``"velocity"`` (default) streams the plan's velocity commands;
         ``"position_velocity"`` streams the plan's position with its velocity as feed-forward
         while tracking a plan (PX4's position loop removes the slow tail of its velocity response).
@@ -185,6 +191,7 @@ class LoopConfig:
     timesync_hz: float = 2.0
     plan_lead_max_s: float = 0.25
     drift_window_s: float = 0.0
+    response_state: str = "steady"
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -195,6 +202,10 @@ class LoopConfig:
         set_("tracking_margin_m2", check.number("tracking_margin_m2", self.tracking_margin_m2, lo=0.0, hi=100.0))
         check.choice("setpoint_kind", self.setpoint_kind, ("velocity", "position_velocity"))
         check.choice("initial_velocity", self.initial_velocity, ("plan", "estimate"))
+        check.choice("response_state", self.response_state, ("steady", "observed"))
+        if self.response_state == "observed" and self.setpoint_kind != "velocity":
+            raise ConfigError(f"response_state = 'observed' needs setpoint_kind = 'velocity' (the observer "
+                              f"models the autopilot's velocity loop), got {self.setpoint_kind!r}")
         set_("max_plan_age_s", check.number("max_plan_age_s", self.max_plan_age_s, positive=True, hi=10.0))
         set_("plan_lead_max_s", check.number("plan_lead_max_s", self.plan_lead_max_s, lo=0.0, hi=1.0))
         set_("timesync_hz", check.number("timesync_hz", self.timesync_hz, lo=0.0, hi=50.0))
@@ -344,6 +355,9 @@ def scenario_from_dict(data: Mapping[str, Any], path: str | Path = "<dict>", **p
         raise ConfigError(str(exc)) from None
 
     loop = check.build_section(LoopConfig, _section(data, "companion", where), f"{path} [companion]")
+    if loop.response_state == "observed" and planner.vehicle_response is None:
+        raise ConfigError(f"{path} [companion]: response_state = 'observed' needs [planner] vehicle_response "
+                          f"(the velocity lag has no internal state to observe)")
     offboard = check.build_section(OffboardConfig, _section(data, "offboard", where), f"{path} [offboard]")
     walls, statics = _map(data, path)
     return CompanionScenario(

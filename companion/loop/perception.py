@@ -14,6 +14,8 @@ import logging
 
 import numpy as np
 
+from companion.core.planner.response_observer import ResponseObserver
+from companion.core.planner.vehicle_model import ResponseModel
 from companion.loop.config import CompanionScenario
 from companion.loop.vehicle_clock import VehicleClock
 from companion.mavlink.messages import Key, PoseObservation
@@ -53,6 +55,11 @@ class Perception:
         self._ignored_keys: set[Key] = set()
         #: The autopilot's own position covariance from ODOMETRY (m^2, NED), if it reports one.
         self.reported_cov: np.ndarray | None = None
+        #: The response model's internal state, observed (``[companion] response_state = "observed"``).
+        self.response: ResponseObserver | None = None
+        if scenario.loop.response_state == "observed":
+            planner = scenario.planner
+            self.response = ResponseObserver(ResponseModel(planner.step_s, *planner.vehicle_response))
 
     def observe(self, t_rx: float, obs: PoseObservation, autopilot: Key | None) -> PoseOutcome:
         """Fuse one pose observation received at link time ``t_rx`` (s).
@@ -76,6 +83,8 @@ class Perception:
                     self.drift.clear()       # a new estimate after a gap: no rate across it
                 if obs.velocity_ned is not None:
                     self.drift.add(obs.t_s, obs.position_ned, obs.velocity_ned)
+            if self.response is not None and obs.velocity_ned is not None:
+                self.response.observe(obs.t_s, obs.velocity_ned)
             self.clock.observe_pose(t_rx, obs.t_s)
             if obs.position_cov is not None:
                 self.reported_cov = obs.position_cov

@@ -171,6 +171,7 @@ class RequestBuilder:
         warm_start: Plan | None,
         lead_s: float = 0.0,
         shift: np.ndarray | None = None,
+        response_state: np.ndarray | None = None,
     ) -> ReplanJob:
         """The planning problem at link time ``t_s`` / vehicle time ``t_v`` from the current estimates.
 
@@ -179,6 +180,8 @@ class RequestBuilder:
         time about when it will arrive), from the position estimate now moved by ``shift``
         (NED m: how far the plan in force takes the drone meanwhile); obstacles are predicted
         from that start. Tracks silent for longer than the tracker's ``drop_after_s`` are pruned first.
+        ``response_state`` (3, 2) is the response model's internal state at the plan's start
+        (:attr:`~companion.core.planner.request.PlanRequest.response_state`; ``None``: steady).
         """
         est = perception.drone.state
         n, tau = self.cfg.horizon_steps, self.cfg.step_s
@@ -223,6 +226,7 @@ class RequestBuilder:
             walls_offset=self.scenario.walls_offset,
             upper_bound_mask=np.array(leading, dtype=bool),
             margin_cov=margin if self.loop.tracking_margin_m2 > 0.0 else None,
+            response_state=response_state,
         )
         return ReplanJob(
             seq=seq,
