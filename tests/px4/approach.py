@@ -12,12 +12,21 @@ after PX4 reported OFFBOARD:
   mission's start-to-goal direction): when, how fast along the approach, and how far to
   the side; how far it then goes past the goal; when it first comes within the goal
   tolerance (the companion's goal test, to the 0.3 s of its replan requests);
+- while it is more than the tolerance past the goal after that crossing: how long, the mean
+  velocity error along the approach (setpoint less estimate) and the mean of PX4's own
+  acceleration setpoint along it (POSITION_TARGET_LOCAL_NED ``afx``, ``afy``, ``afz``: the
+  output of its velocity loop, so with a proportional gain of about 1.8 /s on that error,
+  what is left is the loop's integral);
 - with ``--model``, how well the scenario's identified response
-  (``[planner.vehicle_response]``) predicts PX4's velocity and the estimate's position
-  ``h`` seconds ahead under the setpoints actually sent, started per axis either from the
-  model's steady state at the velocity estimate (what the planner does) or from a carried
-  state (the PI integral of setpoint less velocity estimate since OFFBOARD, and the
-  acceleration lag run on it): rms over the flight and over its last part.
+  (``[planner.vehicle_response]``) predicts ``h`` seconds ahead, under the setpoints actually
+  sent, PX4's velocity estimate, its position estimate, and the distance its velocity
+  estimate integrates to ("flown": the position less PX4's drift), rms over the flight and
+  over its last part. Each prediction starts, per axis, at the velocity estimate with the
+  model's other states (the integral, the acceleration) either at their steady state (what
+  the planner does), carried (the integral of setpoint less velocity estimate since
+  OFFBOARD, and the acceleration lag run on it) or observed (the companion's
+  :class:`~companion.core.planner.response_observer.ResponseObserver`, ``[companion]
+  response_state = "observed"``, fed with the same reports and setpoints).
 
 A reading tool for the notes; it asserts nothing.
 """
@@ -31,21 +40,23 @@ from pathlib import Path
 
 import numpy as np
 
-from companion.core.planner.vehicle_model import AxisResponse, discretise
+from companion.core.planner.response_observer import ResponseObserver
+from companion.core.planner.vehicle_model import AxisResponse, ResponseModel, discretise
 from companion.mavlink.messages import decode_odometry
 from companion.mavlink.tlog import read_tlog
 from tests.px4.sitl import REPO
 
 PX4_MAIN_MODE_OFFBOARD = 6
 GRID_S = 0.05          # the setpoints' period (20 Hz) and the grid the model runs on
-HORIZONS_S = (0.6, 1.5, 3.0)
+HORIZONS_S = (1.5, 3.0)
 LATE_AFTER_S = 13.0    # "the last part": the approach to the goal (the encounter is over by then)
 
 
-def load(work: Path) -> tuple[np.ndarray, np.ndarray, float]:
+def load(work: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """PX4's estimate (M, 7: link time s, position NED m, velocity NED m/s), the companion's
-    setpoints (K, 4: link time s, velocity NED m/s) and the link time PX4 first reported OFFBOARD."""
-    odometry, setpoints, offboard = [], [], None
+    setpoints (K, 4: link time s, velocity NED m/s), PX4's acceleration setpoints (J, 4: link
+    time s, NED m/s^2; J may be 0) and the link time PX4 first reported OFFBOARD."""
+    odometry, setpoints, targets, offboard = [], [], [], None
     for t, msg in read_tlog(work / "flight.tlog"):
         kind = msg.get_type()
         if kind == "ODOMETRY":
@@ -54,16 +65,19 @@ def load(work: Path) -> tuple[np.ndarray, np.ndarray, float]:
                 odometry.append((t, *obs.position_ned, *obs.velocity_ned))
         elif kind == "SET_POSITION_TARGET_LOCAL_NED":
             setpoints.append((t, msg.vx, msg.vy, msg.vz))
+        elif kind == "POSITION_TARGET_LOCAL_NED" and msg.get_srcComponent() == 1:
+            targets.append((t, msg.afx, msg.afy, msg.afz))
         elif kind == "HEARTBEAT" and offboard is None and msg.get_srcComponent() == 1 \
                 and (msg.custom_mode >> 16) & 0xFF == PX4_MAIN_MODE_OFFBOARD:
             offboard = t
     if offboard is None or not odometry or not setpoints:
         raise ValueError(f"{work / 'flight.tlog'}: no OFFBOARD, ODOMETRY or setpoints in it")
-    return np.array(odometry), np.array(setpoints), offboard
+    return np.array(odometry), np.array(setpoints), np.array(targets).reshape(-1, 4), offboard
 
 
-def crossing(odometry: np.ndarray, offboard: float, start: np.ndarray, goal: np.ndarray, tolerance: float) -> dict:
-    """The estimate's first pass of the goal (see the module docstring)."""
+def crossing(odometry: np.ndarray, setpoints: np.ndarray, targets: np.ndarray, offboard: float,
+             start: np.ndarray, goal: np.ndarray, tolerance: float) -> dict:
+    """The estimate's first pass of the goal and the time beyond it (see the module docstring)."""
     ahead = (goal - start) / np.linalg.norm(goal - start)
     offset = odometry[:, 1:4] - goal
     along = offset @ ahead
@@ -79,6 +93,16 @@ def crossing(odometry: np.ndarray, offboard: float, start: np.ndarray, goal: np.
             to_the_side_m=float(np.linalg.norm(offset[k] - along[k] * ahead)),
             beyond_m=float(along[k:].max()),
         )
+        beyond = np.arange(odometry.shape[0]) >= k
+        beyond &= along > tolerance
+        if beyond.any():
+            t = odometry[beyond, 0]
+            held = np.searchsorted(setpoints[:, 0], t, side="right") - 1
+            error = (setpoints[np.maximum(held, 0), 1:4] - odometry[beyond, 4:7]) @ ahead
+            out.update(beyond_tolerance_s=float(t.size and t[-1] - t[0]), velocity_error_along_mps=float(error.mean()))
+            if targets.shape[0]:
+                acc = np.stack([np.interp(t, targets[:, 0], targets[:, 1 + j]) for j in range(3)], axis=1) @ ahead
+                out["px4_acceleration_setpoint_along_mps2"] = float(acc.mean())
     return out
 
 
@@ -96,9 +120,34 @@ def _carried_states(axis: AxisResponse, u: np.ndarray, v: np.ndarray) -> np.ndar
     return out
 
 
+def _observed_states(response: tuple[AxisResponse, AxisResponse], odometry: np.ndarray, setpoints: np.ndarray,
+                     grid: np.ndarray) -> np.ndarray:
+    """The companion's :class:`~companion.core.planner.response_observer.ResponseObserver` run over
+    the flight (each setpoint at its link time, each velocity report at its own): its internal
+    state (M, 3, 2), ``(xi, a)`` per NED axis, at each grid time (predicted from the last report)."""
+    observer = ResponseObserver(ResponseModel(GRID_S, *response))
+    out = np.zeros((grid.size, 3, 2))
+    sent = reported = 0
+    for i, t in enumerate(grid):
+        while reported < odometry.shape[0] and odometry[reported, 0] <= t:
+            t_report = odometry[reported, 0]
+            while sent < setpoints.shape[0] and setpoints[sent, 0] <= t_report:
+                observer.command(setpoints[sent, 0], setpoints[sent, 1:4])
+                sent += 1
+            observer.observe(t_report, odometry[reported, 4:7])
+            reported += 1
+        while sent < setpoints.shape[0] and setpoints[sent, 0] <= t:
+            observer.command(setpoints[sent, 0], setpoints[sent, 1:4])
+            sent += 1
+        state = observer.internal(t)
+        if state is not None:
+            out[i] = state
+    return out
+
+
 def model_prediction(odometry: np.ndarray, setpoints: np.ndarray, offboard: float,
                      response: tuple[AxisResponse, AxisResponse]) -> list[dict]:
-    """The identified response's prediction errors ``h`` ahead, steady-state start against carried state."""
+    """The identified response's prediction errors ``h`` ahead from each start (see the module docstring)."""
     end = min(odometry[-1, 0], setpoints[-1, 0]) - GRID_S
     grid = np.arange(offboard, end, GRID_S)
     position = np.stack([np.interp(grid, odometry[:, 0], odometry[:, 1 + k]) for k in range(3)], axis=1)
@@ -106,6 +155,7 @@ def model_prediction(odometry: np.ndarray, setpoints: np.ndarray, offboard: floa
     held = np.searchsorted(setpoints[:, 0], grid, side="right") - 1     # the setpoint in force (zero-order hold)
     command = np.where(held[:, None] >= 0, setpoints[np.maximum(held, 0), 1:4], 0.0)
     late = grid - offboard > LATE_AFTER_S
+    observed = _observed_states(response, odometry[odometry[:, 0] >= offboard], setpoints, grid)
     rows = []
     for k, name in enumerate("NED"):
         axis = response[0] if k < 2 else response[1]
@@ -114,22 +164,25 @@ def model_prediction(odometry: np.ndarray, setpoints: np.ndarray, offboard: floa
         for h in HORIZONS_S:
             n = int(round(h / GRID_S))
             starts = np.arange(0, grid.size - n, 2)
-            for start_name in ("steady", "carried"):
-                errors = np.empty((starts.size, 2))
+            for start_name in ("steady", "carried", "observed"):
+                errors = np.empty((starts.size, 3))
                 for row, i in enumerate(starts):
                     if start_name == "steady":
                         x = axis.steady_state(velocity[i, k])
-                    else:
+                    elif start_name == "carried":
                         x = np.array([0.0, velocity[i, k], carried[i, 0]] + ([carried[i, 1]] if axis.accel_lag_s > 0 else []))
+                    else:
+                        x = np.array([0.0, velocity[i, k], *observed[i, k]])[:ad.shape[0]]
                     for j in range(n):
                         x = ad @ x + bd * command[i + j, k]
-                    errors[row] = x[1] - velocity[i + n, k], x[0] - (position[i + n, k] - position[i, k])
+                    flown = np.trapezoid(velocity[i:i + n + 1, k], dx=GRID_S)   # the velocity estimate's integral
+                    errors[row] = x[1] - velocity[i + n, k], x[0] - (position[i + n, k] - position[i, k]), x[0] - flown
                 last = late[starts]
                 rms = np.sqrt((errors**2).mean(axis=0))
-                rms_late = np.sqrt((errors[last] ** 2).mean(axis=0)) if last.any() else (np.nan, np.nan)
+                rms_late = np.sqrt((errors[last] ** 2).mean(axis=0)) if last.any() else np.full(3, np.nan)
                 rows.append({"axis": name, "h_s": h, "start": start_name, "velocity_rms_mps": rms[0],
-                             "position_rms_m": rms[1], "late_velocity_rms_mps": rms_late[0],
-                             "late_position_rms_m": rms_late[1]})
+                             "position_rms_m": rms[1], "flown_rms_m": rms[2], "late_velocity_rms_mps": rms_late[0],
+                             "late_position_rms_m": rms_late[1], "late_flown_rms_m": rms_late[2]})
     return rows
 
 
@@ -151,18 +204,18 @@ def main(argv: list[str] | None = None) -> int:
     table = scenario["planner"].get("vehicle_response")
     for work in args.works:
         try:
-            odometry, setpoints, offboard = load(work)
+            odometry, setpoints, targets, offboard = load(work)
         except (ValueError, OSError) as exc:   # TlogError is a ValueError: the message names the file
             print(f"approach: {exc}", file=sys.stderr)
             return 2
-        passed = crossing(odometry, offboard, start, goal, tolerance)
+        passed = crossing(odometry, setpoints, targets, offboard, start, goal, tolerance)
         print(work, ", ".join(f"{k} {'-' if v is None else f'{v:.2f}'}" for k, v in passed.items()))
         if args.model and table:
             response = tuple(AxisResponse.from_mapping(table[k], f"vehicle_response.{k}") for k in ("horizontal", "vertical"))
             for r in model_prediction(odometry, setpoints, offboard, response):
-                print(f"  {r['axis']} {r['h_s']:.1f} s ahead, {r['start']:7s}: velocity rms {r['velocity_rms_mps']:.3f} m/s, "
-                      f"position {r['position_rms_m']:.3f} m; after {LATE_AFTER_S:g} s {r['late_velocity_rms_mps']:.3f} m/s, "
-                      f"{r['late_position_rms_m']:.3f} m")
+                print(f"  {r['axis']} {r['h_s']:.1f} s ahead, {r['start']:8s}: velocity {r['velocity_rms_mps']:.3f} m/s, "
+                      f"position {r['position_rms_m']:.3f} m, flown {r['flown_rms_m']:.3f} m; after {LATE_AFTER_S:g} s: "
+                      f"{r['late_velocity_rms_mps']:.3f} m/s, {r['late_position_rms_m']:.3f} m, {r['late_flown_rms_m']:.3f} m")
     return 0
 
 
