@@ -228,6 +228,8 @@ class Companion:
             if self.state.mode not in (LoopMode.WAITING, LoopMode.IDLE):
                 self.state.mode = LoopMode.IDLE
             self.executor.hold()
+            if self.perception.response is not None:
+                self.perception.response.reset()   # no setpoint of ours in force
             out.extend(self._collect_plans(t_s, apply=False))
             return out
         if not seq.engaged:
