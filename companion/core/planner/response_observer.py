@@ -35,20 +35,20 @@ NOISE_PSD = 0.05
 VELOCITY_VAR = 0.01
 #: Setpoints held for the next report at most; older ones are folded into the estimate.
 MAX_PENDING = 64
-_CACHE = 64   # discretisations kept per axis response (reports at a fixed rate repeat a few steps)
+_CACHE = 64   # discretisations kept per axis response (north and east share theirs; a fixed rate repeats its steps)
 
 
 class _Axis:
     """One axis's filter: state ``(v, xi[, a])`` (m/s, m, m/s^2) and its covariance."""
 
-    def __init__(self, response: AxisResponse) -> None:
+    def __init__(self, response: AxisResponse, steps: dict[float, tuple[np.ndarray, np.ndarray]]) -> None:
         a, b = response.matrices()
         self.a, self.b = a[1:, 1:], b[1:]          # the position is not observed: dropped
         self.n = self.b.size
         self.noise = np.zeros(self.n)
         self.noise[-1 if self.n == 3 else 0] = 1.0   # into the acceleration (v' without a lag)
         self.response = response
-        self._steps: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._steps = steps          # shared by the axes of one response (north and east)
         self.x = np.zeros(self.n)
         self.cov = np.eye(self.n)
 
@@ -91,7 +91,8 @@ class ResponseObserver:
     """
 
     def __init__(self, model: ResponseModel) -> None:
-        self._axes = tuple(_Axis(axis) for axis in model.axes)
+        steps: dict[AxisResponse, dict] = {}
+        self._axes = tuple(_Axis(axis, steps.setdefault(axis, {})) for axis in model.axes)
         self._pending: deque[tuple[float, np.ndarray]] = deque(maxlen=MAX_PENDING)
         self._t: float | None = None
         self._u = np.zeros(3)
