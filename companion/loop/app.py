@@ -359,10 +359,17 @@ class Companion:
         said: Outbox = []
         lead = self.plan_lead_s()
         velocity = self.perception.drone.state.velocity
+        response = self.perception.response
+        response_state = None if response is None else response.internal(t_v + lead)
         if self.perception.drift is not None:   # the estimate's position rate, which the plans are in
             drift = self.perception.drift_mps()
             velocity = velocity + drift
             self.state.drift_max_mps = [max(a, abs(float(b))) for a, b in zip(self.state.drift_max_mps, drift)]
+            if response_state is not None:
+                # the observer's state is the autopilot's, which holds its velocity; the plan's
+                # model runs on velocity + drift, so its state also holds the drift's drag (else
+                # the model would brake the drift away: k d, 0.4 m/s^2 for 0.5 m/s east on PX4 SITL)
+                response_state = response_state + response.model.steady_internal(drift)
         if self.loop.initial_velocity == "plan":
             v0 = self.executor.initial_velocity(velocity, t_v + lead)
         elif lead > 0.0:   # anchored on the estimate, changed as the plan in force changes it over the lead
@@ -378,7 +385,7 @@ class Companion:
             initial_velocity=v0,
             warm_start=self.executor.plan,
             lead_s=lead,
-            response_state=None if self.perception.response is None else self.perception.response.internal(t_v + lead),
+            response_state=response_state,
             shift=self.executor.displacement(t_v, t_v + lead, velocity) if lead > 0.0 else None,
         )
         self._replans_asked += 1

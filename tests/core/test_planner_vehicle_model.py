@@ -159,6 +159,22 @@ def test_that_the_response_model_predicts_a_vehicle_whose_loop_has_not_settled()
     assert model.positions(p0, v0, commands, steady).tobytes() == model.positions(p0, v0, commands).tobytes()
 
 
+def test_that_the_steady_internal_state_of_a_velocity_shifts_the_whole_response_by_it():
+    """The plans run on velocity + drift: a state shifted by the drift's steady internal state,
+    under commands shifted by the drift, flies the same response plus the drift, exactly."""
+    rng = np.random.default_rng(6)
+    model = ResponseModel(0.3, *PX4_LIKE)
+    v0, drift = rng.normal(size=3), np.array([0.2, -0.5, 0.3])
+    internal, commands = rng.normal(size=(3, 2)), rng.normal(size=(10, 3))
+    _, base = model.simulate(v0, commands, internal)
+    _, shifted = model.simulate(v0 + drift, commands + drift, internal + model.steady_internal(drift))
+    np.testing.assert_allclose(shifted, base + drift, atol=1e-12)
+    # without the shift the model brakes the drift away (drag on it)
+    _, unshifted = model.simulate(v0 + drift, commands + drift, internal)
+    assert np.abs(unshifted - (base + drift)).max() > 0.05
+    np.testing.assert_allclose(model.steady_internal(np.ones(3))[:, 0], [a.drag_per_s / a.i_gain_per_s2 for a in model.axes])
+
+
 def test_that_the_lag_model_refuses_an_internal_state():
     lag = LagModel.from_time_constant(0.3, 0.4)
     with pytest.raises(ValueError, match="no internal state"):

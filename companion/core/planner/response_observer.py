@@ -91,6 +91,7 @@ class ResponseObserver:
     """
 
     def __init__(self, model: ResponseModel) -> None:
+        self.model = model
         steps: dict[AxisResponse, dict] = {}
         self._axes = tuple(_Axis(axis, steps.setdefault(axis, {})) for axis in model.axes)
         self._pending: deque[tuple[float, np.ndarray]] = deque(maxlen=MAX_PENDING)

@@ -334,6 +334,16 @@ class ResponseModel:
         return [np.array([0.0, float(v), float(xi), float(a)][:self._discrete[k][0].shape[0]])
                 for k, (v, (xi, a)) in enumerate(zip(np.asarray(v0, dtype=float), internal))]
 
+    def steady_internal(self, v: np.ndarray) -> np.ndarray:
+        """The internal state (3, 2), ``(xi, a)`` per axis, that holds velocity ``v`` (3,) m/s against
+        drag (:meth:`AxisResponse.steady_state`; ``a`` 0 without an acceleration lag). Linear in ``v``:
+        added to another state, it shifts the velocity that state holds by ``v``."""
+        out = np.zeros((3, 2))
+        for k, (axis, vk) in enumerate(zip(self.axes, np.asarray(v, dtype=float))):
+            x = axis.steady_state(float(vk))
+            out[k, :x.size - 2] = x[2:]
+        return out
+
     def increment_coefficients(self, n_steps: int) -> np.ndarray:
         """``h_k`` (n_steps, 3): position increment of step ``i`` per m/s of command ``V_{i-k}``, seconds."""
         out = np.zeros((n_steps, 3))
