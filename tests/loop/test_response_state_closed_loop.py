@@ -7,6 +7,7 @@ steady state of the current speed, which the loop has not reached while it speed
 has left behind while it slows down; ``"observed"`` starts it where the response observer
 finds it. The vehicle then follows the plans more closely, and the replay of the flight's
 log reproduces every command (the observer runs on message stamps and the setpoints sent).
+The last test pins the loop's wiring: what each request carries, with the drift on.
 """
 
 from __future__ import annotations
