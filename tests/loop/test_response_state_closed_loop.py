@@ -27,9 +27,11 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _scenario(tmp_path: Path, response_state: str) -> Path:
+    """The shipped PX4-profile scenario (which observes the state) with ``response_state`` set."""
     text = (ROOT / "configs" / "antipodal_px4sim.toml").read_text()
+    assert text.count('response_state = "observed"\n') == 1
     path = tmp_path / f"px4sim_{response_state}.toml"
-    path.write_text(text.replace("[companion]\n", f'[companion]\nresponse_state = "{response_state}"\n', 1))
+    path.write_text(text.replace('response_state = "observed"\n', f'response_state = "{response_state}"\n'))
     with open(path, "rb") as f:
         assert tomllib.load(f)["companion"]["response_state"] == response_state
     return path

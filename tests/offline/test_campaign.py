@@ -36,7 +36,7 @@ from companion.offline.campaign import (
     write_scenario,
 )
 from companion.cli import main
-from companion.errors import InputError
+from companion.errors import ConfigError, InputError
 from companion.core.overlap import touch_radius
 from companion.loop.config import load_scenario as companion_load
 from mavsim.lockstep import LockstepSimulator
@@ -128,6 +128,8 @@ def test_that_the_px4_profile_flies_the_same_encounter_with_the_identified_plann
     response = px4["planner"].pop("vehicle_response")
     shipped = tomllib.loads((ROOT / "configs" / "antipodal_px4sim.toml").read_text())["planner"]["vehicle_response"]
     assert response == shipped and set(response) == {"horizontal", "vertical"}
+    # the plans start the response's internal state as the shipped PX4-profile scenario does
+    assert px4["companion"].pop("response_state") == "observed"
     for key in ("velocity_time_constant_s", "accel_max_mps2"):
         del lag["sim"][key]
     del lag["planner"]["velocity_time_constant_s"]
@@ -136,6 +138,7 @@ def test_that_the_px4_profile_flies_the_same_encounter_with_the_identified_plann
     assert mavsim_load_dict(data).sim.vehicle == "px4"
     assert campaign_header("antipodal", 1, 0.9, 40.0, vehicle="px4")["vehicle"] == "px4"
     assert "vehicle" not in campaign_header("antipodal", 1, 0.9, 40.0)   # files from before still resume
+    assert campaign_header("antipodal", 1, 0.9, 40.0, vehicle="px4", response_state="observed")["response_state"] == "observed"
     with pytest.raises(InputError, match="unknown vehicle profile 'sih'"):
         generate_scenario("antipodal", 5, 3, vehicle="sih")
 
@@ -393,3 +396,14 @@ def test_that_the_promised_probability_is_scipy_stats_number_for_number():
     for c in contours:
         expected = float(norm.cdf(-math.sqrt(chi2.ppf(min(max(c, 0.0), 1.0), 3))))
         assert promised_probability(c) == expected, c
+
+
+def test_that_a_px4_results_file_from_before_the_observed_state_refuses_to_resume(tmp_path):
+    """Its rows were flown from the steady state: resuming them under the observed one would mix the two."""
+    from companion.offline.campaign.store import ResultsFile
+
+    path = tmp_path / "px4.jsonl"
+    ResultsFile(path, campaign_header("antipodal", 1, 0.9, 40.0, vehicle="px4")).close()
+    now = campaign_header("antipodal", 1, 0.9, 40.0, vehicle="px4", response_state="observed")
+    with pytest.raises(ConfigError, match=r"was written for response_state = None, this campaign has 'observed'"):
+        ResultsFile(path, now, resume=True)

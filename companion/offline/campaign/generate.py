@@ -75,14 +75,25 @@ QUIET_STREAMS_HZ = {"ATTITUDE": 5.0, "GLOBAL_POSITION_INT": 5.0, "LOCAL_POSITION
 ENGAGE_S, CRUISE_MPS = 3.2, 1.75
 
 
-def px4_profile_response() -> dict[str, dict[str, float]]:
-    """The planner's ``vehicle_response`` table for mavsim's ``px4`` profile (from :data:`PX4_PROFILE_SCENARIO`)."""
+def _px4_profile_scenario() -> dict:
+    """:data:`PX4_PROFILE_SCENARIO`'s tables."""
     import tomllib
     from importlib import resources
 
     text = resources.files("companion.scenarios").joinpath(PX4_PROFILE_SCENARIO).read_text(encoding="utf-8")
-    table = tomllib.loads(text)["planner"]["vehicle_response"]
+    return tomllib.loads(text)
+
+
+def px4_profile_response() -> dict[str, dict[str, float]]:
+    """The planner's ``vehicle_response`` table for mavsim's ``px4`` profile (from :data:`PX4_PROFILE_SCENARIO`)."""
+    table = _px4_profile_scenario()["planner"]["vehicle_response"]
     return {name: dict(axis) for name, axis in table.items()}
+
+
+def px4_profile_response_state() -> str:
+    """Where the plans start the response's internal state against the ``px4`` profile
+    (``[companion] response_state`` of :data:`PX4_PROFILE_SCENARIO`)."""
+    return str(_px4_profile_scenario().get("companion", {}).get("response_state", "steady"))
 
 
 def episode_rng(seed: int, index: int) -> np.random.Generator:
@@ -276,6 +287,7 @@ def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90
         del data["sim"]["accel_max_mps2"]
         data["sim"]["vehicle"] = "px4"
         data["planner"]["vehicle_response"] = px4_profile_response()
+        data["companion"]["response_state"] = px4_profile_response_state()
     if walls:
         data["map"] = {"walls": walls}
     return data

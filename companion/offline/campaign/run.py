@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from companion.errors import ConfigError, InputError, LinkError
-from companion.offline.campaign.generate import DEFAULT_DURATION_S, FAMILIES, METHODS, episode_sim_seed, generate_scenario
+from companion.offline.campaign.generate import (DEFAULT_DURATION_S, FAMILIES, METHODS, episode_sim_seed, generate_scenario,
+                                                px4_profile_response_state)
 from companion.offline.campaign.progress import Progress
 from companion.offline.campaign.results import CampaignResult, EpisodeResult
 from companion.offline.campaign.score import score_run
@@ -190,7 +191,9 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
     episodes, methods = tuple(episodes), tuple(methods)
     workers = workers or os.cpu_count() or 1
     keys = [(i, m) for i in episodes for m in methods]
-    store = (ResultsFile(results_path, campaign_header(family, seed, c_min, duration_s, noise_correlation_s, vehicle), resume=resume)
+    response_state = px4_profile_response_state() if vehicle == "px4" else None
+    store = (ResultsFile(results_path, campaign_header(family, seed, c_min, duration_s, noise_correlation_s, vehicle,
+                                                       response_state), resume=resume)
              if results_path is not None else None)
     in_memory: dict[tuple[int, str], EpisodeResult] = {}
     todo = [EpisodeTask(family, seed, i, m, c_min, duration_s, noise_correlation_s, vehicle) for i, m in keys if store is None or (i, m) not in store]

@@ -34,14 +34,19 @@ MAX_LINE_BYTES = 16 * 1024 * 1024
 
 
 def campaign_header(family: str, seed: int, c_min: float, duration_s: float,
-                    noise_correlation_s: float = 0.0, vehicle: str = "lag") -> dict[str, Any]:
+                    noise_correlation_s: float = 0.0, vehicle: str = "lag",
+                    response_state: str | None = None) -> dict[str, Any]:
     """The header line: what every row of the file depends on (``vehicle`` only when it is
-    not the default lag profile)."""
+    not the default lag profile; ``response_state``, where the plans start the response
+    model's internal state, only when given: a file written before it was recorded then
+    refuses to resume under it)."""
     header = {"format": FORMAT, "version": VERSION, "family": family, "seed": int(seed),
               "c_min": float(c_min), "duration_s": float(duration_s),
               "noise_correlation_s": float(noise_correlation_s)}
     if vehicle != "lag":
         header["vehicle"] = vehicle
+    if response_state is not None:
+        header["response_state"] = response_state
     return header
 
 
