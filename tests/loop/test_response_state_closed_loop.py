@@ -75,44 +75,26 @@ def test_that_each_request_carries_the_observed_state_with_the_drifts_drag():
     """The loop's wiring: while engaged, every request's response_state is the observer's state at
     the request's time plus the internal state that holds the drift (the plans run on velocity +
     drift); once PX4 leaves OFFBOARD the observer forgets its state."""
-    import dataclasses
-
-    from pymavlink.dialects.v20 import common as mavlink2
-
-    from companion.core.planner import Planner
     from companion.core.planner.vehicle_model import AxisResponse
-    from companion.loop.app import Companion
-    from companion.loop.config import load_scenario
-    from tests.loop.test_request_gating import SCENARIO, HeldPlanner
-    from tests.support.inbound import px4_heartbeat, px4_offboard_heartbeat, received
+    from tests.loop.test_position_drift import EXTRA
+    from tests.loop.test_tracking_margin import _companion, _fly
+    from tests.support.inbound import px4_heartbeat, received
 
-    scenario = load_scenario(SCENARIO)
     response = (AxisResponse(1.51, 0.3254, 0.8163, 0.2169), AxisResponse(3.211, 0.1386, 0.5217, 0.017))
-    scenario = dataclasses.replace(
-        scenario, planner=dataclasses.replace(scenario.planner, vehicle_response=response, velocity_time_constant_s=0.0),
-        loop=dataclasses.replace(scenario.loop, response_state="observed", drift_window_s=1.0,
-                                 initial_velocity="estimate", plan_lead_max_s=0.0))
-    service = HeldPlanner(Planner(scenario.planner))
-    companion = Companion(scenario, planning=service)
+    companion, service = _companion(planner={"vehicle_response": response, "velocity_time_constant_s": 0.0},
+                                    response_state="observed", drift_window_s=1.0, initial_velocity="estimate",
+                                    plan_lead_max_s=0.0)
     observer = companion.perception.response
-    drift = np.array([0.0, 0.3, -0.2])      # the position moves against the reported velocity (1 m/s north)
-    checked, t = 0, 0.0
-    while t < 3.0:
-        p = np.array([t, 0.0, -5.0]) + drift * t
-        for msg in (px4_offboard_heartbeat(),
-                    mavlink2.MAVLink_local_position_ned_message(int(t * 1000), *p, 1.0, 0.0, 0.0)):
-            companion.handle(received(msg, t_s=t))
-        companion.tick(t)
-        job = service.waiting[0] if service.waiting else None
-        if job is not None and job.t_link_s == t:          # asked in this tick: the observer is as it was then
-            want = observer.internal(job.t_vehicle_s) + observer.model.steady_internal(companion.perception.drift_mps())
-            np.testing.assert_array_equal(job.request.response_state, want)
-            checked += bool(np.any(companion.perception.drift_mps()))
-        if job is not None and t - job.t_link_s >= 0.05 - 1e-9:
-            service.answer(solve=True)
-        t = round(t + 0.05, 2)
-    assert checked >= 5 and observer.started
+    checked = []
+
+    def asked(job):   # in the tick that asked: the observer is as it was then
+        want = observer.internal(job.t_vehicle_s) + observer.model.steady_internal(companion.perception.drift_mps())
+        np.testing.assert_array_equal(job.request.response_state, want)
+        checked.append(bool(np.any(companion.perception.drift_mps())))
+
+    _fly(companion, service, 3.0, drift=EXTRA, asked=asked)
+    assert sum(checked) >= 5 and observer.started
     # PX4 leaves OFFBOARD (a plain HEARTBEAT): its own loop is in force, the observer forgets
-    companion.handle(received(px4_heartbeat(), t_s=t))
-    companion.tick(t)
-    assert not observer.started and observer.internal(t) is None
+    companion.handle(received(px4_heartbeat(), t_s=3.0))
+    companion.tick(3.0)
+    assert not observer.started and observer.internal(3.0) is None

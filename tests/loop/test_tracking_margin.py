@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -51,19 +52,22 @@ def test_that_a_bad_margin_is_refused_by_name(margin, word):
         dataclasses.replace(req, margin_cov=margin)
 
 
-def _companion(**loop) -> tuple[Companion, HeldPlanner]:
+def _companion(planner: dict | None = None, **loop) -> tuple[Companion, HeldPlanner]:
+    """The short hop's companion with ``[companion]`` settings ``loop`` (and ``[planner]`` ones ``planner``)."""
     scenario = load_scenario(SCENARIO)
-    scenario = dataclasses.replace(scenario, loop=dataclasses.replace(scenario.loop, **loop))
+    scenario = dataclasses.replace(scenario, loop=dataclasses.replace(scenario.loop, **loop),
+                                   planner=dataclasses.replace(scenario.planner, **(planner or {})))
     service = HeldPlanner(Planner(scenario.planner))
     return Companion(scenario, planning=service), service
 
 
 def _fly(companion: Companion, service: HeldPlanner, seconds: float = 2.0, drift: np.ndarray | None = None,
-         streamed: list | None = None) -> list:
+         streamed: list | None = None, asked: Callable | None = None) -> list:
     """Poses flying north at 1 m/s (LOCAL_POSITION_NED) at 20 Hz; every job is answered at the next tick.
 
     ``drift`` (m/s NED) moves the reported position against the reported velocity; ``streamed``
-    collects, per tick, the setpoint's velocity with the executor's command and the loop's drift then.
+    collects, per tick, the setpoint's velocity with the executor's command and the loop's drift then;
+    ``asked(job)`` is called in the tick that asked for a job, before anything else changes.
     """
     jobs, t = [], 0.0
     extra = np.zeros(3) if drift is None else np.asarray(drift, dtype=float)
@@ -79,6 +83,8 @@ def _fly(companion: Companion, service: HeldPlanner, seconds: float = 2.0, drift
         if service.waiting:
             if service.waiting[0] not in jobs:
                 jobs.append(service.waiting[0])
+                if asked is not None:
+                    asked(service.waiting[0])
             elif t - service.waiting[0].t_link_s >= 0.05 - 1e-9:
                 service.answer(solve=True)
         t = round(t + 0.05, 2)
