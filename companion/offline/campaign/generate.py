@@ -32,6 +32,7 @@ tau = 0.3 s, accel 0.5 m/s^2, speed 3 m/s, sensing range 10 m.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from typing import Any, Callable
@@ -75,8 +76,9 @@ QUIET_STREAMS_HZ = {"ATTITUDE": 5.0, "GLOBAL_POSITION_INT": 5.0, "LOCAL_POSITION
 ENGAGE_S, CRUISE_MPS = 3.2, 1.75
 
 
+@functools.cache
 def _px4_profile_scenario() -> dict:
-    """:data:`PX4_PROFILE_SCENARIO`'s tables."""
+    """:data:`PX4_PROFILE_SCENARIO`'s tables, read once (callers copy what they hand out)."""
     import tomllib
     from importlib import resources
 
