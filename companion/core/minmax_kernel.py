@@ -388,8 +388,7 @@ def minmax3(m1: np.ndarray, m2: np.ndarray, s1: np.ndarray, s2: np.ndarray,
     stalled : int
         Pairs whose iteration hit ``max_newton`` steps.
     """
-    fields, stalled = _run(m1, m2, s1, s2, u_tol, max_newton, False)
-    return fields, stalled
+    return _run(m1, m2, s1, s2, u_tol, max_newton, False)
 
 
 def minmax3_as_given(m1: np.ndarray, m2: np.ndarray, c1: np.ndarray, c2: np.ndarray,
