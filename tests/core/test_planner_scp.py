@@ -226,3 +226,61 @@ def test_that_the_caches_compare_positions_as_array_equal_does(seed):
     elif kind == 5:
         other = rng.normal(size=(len(kept) + 1, 3))
     assert _same_values(kept, other) == np.array_equal(kept, other)
+
+
+def _rejecting_the_planners_iterates(monkeypatch, planner: Planner, which: str) -> list:
+    """Make ``planner``'s exact recheck reject QP solutions (``which``: ``"last"``, the latest
+    only, or ``"all"``); returns the list the SCP's QP steps are collected in."""
+    from companion.core.planner import scp
+
+    steps = []
+    solve_qp = scp.solve_qp
+
+    def collecting(*args, **kwargs):
+        step = solve_qp(*args, **kwargs)
+        steps.append(step)
+        return step
+
+    recheck = planner.formulation.recheck
+
+    def rejecting(request, positions, in_range):
+        figs, ok = recheck(request, positions, in_range)
+        rejected = steps[-1:] if which == "last" else steps
+        return figs, ok and not any(np.array_equal(positions, s.positions) for s in rejected)
+
+    monkeypatch.setattr(scp, "solve_qp", collecting)
+    monkeypatch.setattr(planner.formulation, "recheck", rejecting)
+    return steps
+
+
+def test_that_an_unsafe_last_iterate_gives_way_to_the_cheapest_safe_earlier_one(monkeypatch):
+    cfg, req = scenario_one(scp_max_iterations=6)
+    planner = Planner(cfg)
+    steps = _rejecting_the_planners_iterates(monkeypatch, planner, "last")
+    plan = planner.solve(req)
+    assert len(steps) == 6                                   # never converged: the last was always rejected
+    earlier = [s for s in steps[:-1] if s.safety_slack <= 1e-4]
+    best = min(earlier, key=lambda s: s.objective)
+    assert plan.status == "optimal"                          # instead of failed (and the loop braking)
+    np.testing.assert_array_equal(plan.velocities, best.velocities)
+    k = next(i for i, s in enumerate(steps, 1) if s is best)
+    assert f"returned iterate {k} of 6 (safe; the last was not)" in plan.notes
+    assert np.all(exact_contour(req, plan, 0.5)[plan.in_range] >= cfg.c_min - 1e-6)
+
+
+def test_that_without_a_safe_iterate_the_shifted_previous_plan_is_flown_if_safe_else_the_plan_fails(monkeypatch):
+    cfg, req = scenario_one(scp_max_iterations=4)
+    previous = Planner(cfg).solve(req)
+    # one step later: the drone where the plan put it, the obstacle one step on
+    later = np.vstack([req.obstacle_means[0, 1:], 2 * req.obstacle_means[0, -1] - req.obstacle_means[0, -2]])
+    req = dataclasses.replace(req, position=previous.positions[0], velocity=previous.velocities[0],
+                              obstacle_means=later[None])
+    planner = Planner(cfg)
+    _rejecting_the_planners_iterates(monkeypatch, planner, "all")
+    plan = planner.solve(req, warm_start=previous)
+    assert plan.status == "optimal"
+    assert "returned the SCP's starting iterate (safe)" in plan.notes   # not the budget's: it did not run out
+    np.testing.assert_allclose(plan.velocities[:-1], previous.velocities[1:], atol=1e-12)
+    cold = planner.solve(req)                                # a cold start (a line through the obstacle) is not safe
+    assert cold.status == "failed"
+    assert "exact recheck violated c_min without slack" in cold.notes

@@ -22,8 +22,9 @@ lag ``p_i = p_{i-1} + b V_i + c V_{i-1}`` (:mod:`companion.core.planner.vehicle_
 
 Every replan runs within ``replan_work_budget`` work units (ADMM iterations of all its
 QPs plus a fixed charge per QP, :mod:`companion.core.planner.budget`); when they run
-out the plan is the best safe iterate (the last QP's solution, else the SCP's start,
-whichever passes the exact recheck) or ``failed``. The only clock is
+out, or the iteration cap ends the SCP on an unsafe solution that needed no slack, the plan
+is the best safe iterate (the last QP's solution, else the cheapest earlier one, else the
+SCP's start, whichever first passes the exact recheck) or ``failed``. The only clock is
 ``time.perf_counter()``, read for the ``solve_time_s`` diagnostic; it never influences
 the plan (no time limit is handed to the solver).
 """
@@ -161,6 +162,7 @@ class Planner:
         iterations = 0
         converged = False
         tolerance = cfg.scp_tolerance if warm_start is None else cfg.scp_tolerance_warm
+        steps: list[QpStep] = []         # every iterate, for the best safe one (_finish)
         for iterations in range(1, cfg.scp_max_iterations + 1):
             new = solve_qp(cfg, form, ws, data, v_bar, p_bar, lam_bar, budget, first=iterations == 1,
                            try_hard=step is None or not step.least_violation)
@@ -174,6 +176,7 @@ class Planner:
             if not new.solution.accurate:
                 notes.append(f"solver: {new.solution.status} at iteration {iterations}")
             step = new
+            steps.append(step)
             moved = step.moved
             v_bar, p_bar = step.velocities, step.positions
             lam_bar = step.lam if form.carries_lam else None
@@ -194,7 +197,7 @@ class Planner:
             ws.last_y = step.solution.y
         if not converged and step is not None and len(notes) == 0:
             notes.append("max_iterations")
-        return self._finish(request, data, step, v_bar, v_start, iterations, budget, notes, t0)
+        return self._finish(request, data, step, v_bar, v_start, iterations, budget, notes, t0, steps[:-1])
 
     def qp_step(self, request: PlanRequest, velocities: np.ndarray, lam: np.ndarray | None = None) -> QpStep:
         """Solve the single QP of the SCP linearised at ``velocities`` (N, 3) (and ``lam``).
@@ -273,7 +276,8 @@ class Planner:
         return self._workspaces[key]
 
     def _finish(self, request: PlanRequest, data: RequestData, step: QpStep | None, v_bar: np.ndarray,
-                v_start: np.ndarray, iterations: int, budget: WorkBudget, notes: list[str], t0: float) -> Plan:
+                v_start: np.ndarray, iterations: int, budget: WorkBudget, notes: list[str], t0: float,
+                earlier: list[QpStep] = ()) -> Plan:
         cfg = self.config
         if step is None:
             velocities = v_bar
@@ -288,19 +292,30 @@ class Planner:
                 if upper > C_MAX_SLACK_TOL:
                     notes.append(f"c_max_violated: slack {upper:.3g}")
         figs, ok = self.formulation.recheck(request, positions, data.in_range)
-        # Out of budget with an unsafe last solution: a least-violation solution (it carries
-        # the slack the situation forced) is flown as a slack plan, as without a budget
-        # (braking instead in the corridor with c_max: 6 of 8 seeds collided, measured);
-        # anything else falls back to the SCP's start if that is safe, else fails.
-        if budget.exhausted and not ok and step is not None and slack_max <= SLACK_TOL:
-            # the best safe iterate: the last QP's solution was not; the SCP's start (the
-            # previous plan shifted, within the speed and acceleration bounds) may be
-            start = self.lag.positions(request.position, data.v0, v_start, request.response_state)
-            figs_start, ok = self.formulation.recheck(request, start, data.in_range)
-            if ok:
-                velocities, positions, figs = v_start.copy(), start, figs_start
-                slack_max, cost = 0.0, np.nan
-                notes.append("work_budget: returned the SCP's starting iterate (safe)")
+        # An unsafe last solution: a least-violation solution (it carries the slack the
+        # situation forced) is flown as a slack plan, as without a budget (braking instead
+        # in the corridor with c_max: 6 of 8 seeds collided, measured). One that needed no
+        # slack yet fails the exact recheck (out of budget, or stopped at the iteration cap
+        # on the wrong side of a cycle) gives way to the best safe iterate: the earlier
+        # iterates without safety slack, cheapest first, then the SCP's start (the previous
+        # plan shifted, within the speed and acceleration bounds); else the plan fails.
+        if not ok and step is not None and slack_max <= SLACK_TOL:
+            for k, earlier_step in sorted(enumerate(earlier, 1), key=lambda e: e[1].objective):
+                if earlier_step.safety_slack > SLACK_TOL:
+                    continue
+                figs_k, ok = self.formulation.recheck(request, earlier_step.positions, data.in_range)
+                if ok:
+                    velocities, positions, figs = earlier_step.velocities.copy(), earlier_step.positions.copy(), figs_k
+                    slack_max, cost = earlier_step.safety_slack, earlier_step.objective
+                    notes.append(f"returned iterate {k} of {iterations} (safe; the last was not)")
+                    break
+            if not ok:
+                start = self.lag.positions(request.position, data.v0, v_start, request.response_state)
+                figs_start, ok = self.formulation.recheck(request, start, data.in_range)
+                if ok:
+                    velocities, positions, figs = v_start.copy(), start, figs_start
+                    slack_max, cost = 0.0, np.nan
+                    notes.append(("work_budget: " if budget.exhausted else "") + "returned the SCP's starting iterate (safe)")
         # the status comes from the exact figures: slack that only ate into the back-off
         # (formulations.BACKOFF_SIGMA) leaves c_min and the walls holding
         if step is None and budget.exhausted and ok:
