@@ -90,6 +90,14 @@ class PlannerConfig:
     accel_max_mps2 : (3,) floats
         Per-axis acceleration bound, m/s^2: ``|V_i - V_{i-1}| <= a_max * tau``
         (``V_0`` is the current velocity).
+    accel_emergency_mps2 : (3,) floats or None
+        Per-axis acceleration bound of the least-violation QPs, m/s^2 (at least
+        ``accel_max_mps2``): when no plan within ``accel_max_mps2`` keeps every safety
+        row, the replan may brake or swerve up to this before it gives up safety (slack).
+        ``accel_max_mps2`` is a comfort and tracking bound well inside what the vehicle
+        can do; safety outranks it. ``None`` (the default): the least-violation QPs keep
+        ``accel_max_mps2``. Bounds the velocity-lag and instantaneous models only (with a
+        ``vehicle_response`` the autopilot limits acceleration and there are no such rows).
     velocity_time_constant_s : float
         Time constant ``T`` of the vehicle's first-order velocity response to a velocity
         setpoint, seconds (:mod:`companion.core.planner.vehicle_model`). 0 (default) is the
@@ -177,6 +185,7 @@ class PlannerConfig:
     c_max: float | None = None
     velocity_max_mps: tuple[float, float, float] = (3.0, 3.0, 1.0)
     accel_max_mps2: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    accel_emergency_mps2: tuple[float, float, float] | None = None
     velocity_time_constant_s: float = 0.0
     vehicle_response: tuple[AxisResponse, AxisResponse] | None = None
     drone_radius_m: float = 0.5
@@ -217,6 +226,11 @@ class PlannerConfig:
                 raise ConfigError(f"c_max = {self.c_max!r} must be greater than c_min = {self.c_min!r}")
         set_("velocity_max_mps", _axis_vector("velocity_max_mps", self.velocity_max_mps))
         set_("accel_max_mps2", _axis_vector("accel_max_mps2", self.accel_max_mps2))
+        if self.accel_emergency_mps2 is not None:
+            set_("accel_emergency_mps2", _axis_vector("accel_emergency_mps2", self.accel_emergency_mps2))
+            if any(e < a for e, a in zip(self.accel_emergency_mps2, self.accel_max_mps2)):
+                raise ConfigError(f"accel_emergency_mps2 = {list(self.accel_emergency_mps2)} must be at least "
+                                  f"accel_max_mps2 = {list(self.accel_max_mps2)} on every axis")
         set_("scp_max_iterations", check.integer("scp_max_iterations", self.scp_max_iterations, lo=1, hi=MAX_SCP_ITERATIONS))
         set_("solver_max_iter", check.integer("solver_max_iter", self.solver_max_iter, lo=1, hi=MAX_SOLVER_ITERATIONS))
         check.boolean("solver_polish", self.solver_polish)

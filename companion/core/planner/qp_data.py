@@ -68,6 +68,11 @@ class RequestTemplate:
         if not layout.lag.bounds_command_steps:       # a response model: the autopilot limits acceleration
             lo_acc[:], hi_acc[:] = -np.inf, np.inf
         l[layout.row["accel"].slice], u[layout.row["accel"].slice] = lo_acc.ravel(), hi_acc.ravel()
+        #: how far the least-violation QPs widen each acceleration row, m/s (None: not at all)
+        self.accel_widening = None
+        if cfg.accel_emergency_mps2 is not None and layout.lag.bounds_command_steps:
+            widen = (np.asarray(cfg.accel_emergency_mps2, dtype=float) - amax) * tau
+            self.accel_widening = np.ascontiguousarray(np.broadcast_to(widen, (N, 3)).ravel())
         if layout.row["cmd"].size:          # commands within the speed bound: (1 - a) |u_i| <= (1 - a) v_max
             cmd = np.broadcast_to((1.0 - layout.lag.alpha) * vmax, (N, 3)).copy()
             l[layout.row["cmd"].slice], u[layout.row["cmd"].slice] = -cmd.ravel(), cmd.ravel()

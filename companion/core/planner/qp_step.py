@@ -185,7 +185,10 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     least = sol is None or not sol.accurate
     if least:
         hard_status = "skipped" if sol is None else sol.status
+        acc = layout.row["accel"].slice
+        l_acc, u_acc = l[acc].copy(), u[acc].copy()
         sol = least_violation(cfg, ws, data, _primal_start(ws, v_bar, p_bar, lam_bar), budget)
+        l[acc], u[acc] = l_acc, u_acc        # least_violation may have widened them
         if sol is None:
             return None
         logger.debug("hard QP %s; soft QP %s", hard_status, sol.status)
@@ -210,6 +213,17 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     )
 
 
+def _needs_slack(layout, x: np.ndarray) -> bool:
+    """Whether the solution ``x`` uses safety slack (above :data:`SLACK_TOL` on some row)."""
+    return bool(np.any(x[layout.slack_cols[layout.safety_slacks]] * layout.slack_scale > SLACK_TOL))
+
+
+def _accel_rows(layout, x: np.ndarray) -> np.ndarray:
+    """The acceleration rows' values at ``x`` (3N,): ``V_1``, then ``V_i - V_{i-1}``, m/s (row order)."""
+    velocities = x[layout.col["V"].slice].reshape(-1, 3)
+    return np.diff(np.vstack([np.zeros((1, 3)), velocities]), axis=0).ravel()
+
+
 def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: np.ndarray,
                     budget: WorkBudget) -> QpSolution | None:
     """The QP when its safety rows cannot all hold: violate them as little as possible.
@@ -223,6 +237,13 @@ def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: 
     proximal term ``LEAST_VIOLATION_PROX |V - V_bar|^2`` in place of the cost so that
     the QP is strongly convex in the velocities; (2) the real cost with each safety
     slack capped at what (1) needed.
+
+    With ``[planner] accel_emergency_mps2``, when (1) within ``accel_max`` still needs
+    safety slack, (1) is solved again with the acceleration rows widened to that bound
+    (safety outranks the comfort bound), and (2) then widens each acceleration row only as
+    far as that (1) needed, like the slack: the cost alone never buys emergency
+    acceleration (with the whole emergency bound in (2) the corridor's drone chased its
+    leader with it and needed more emergencies, measured). The caller restores the rows.
 
     Every QP is solved within ``budget``; returns None when it ran out first.
     """
@@ -240,9 +261,28 @@ def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: 
     # hit its iteration cap in closed loop with `paper`, measured): restart them at zero.
     qp.warm_start(x=x0, y=np.zeros(layout.m))
     least = budget.solve(qp, cfg.solver_max_iter)
-    qp.update(p_data=data.p_data, q=data.q)
     if least is None or budget.exhausted:
+        qp.update(p_data=data.p_data, q=data.q)
         return None
+    widening, acc = ws.template.accel_widening, layout.row["accel"].slice
+    l_acc, u_acc = l[acc].copy(), u[acc].copy()
+    if widening is not None and np.isfinite(least.x).all() and _needs_slack(layout, least.x):
+        l[acc], u[acc] = l_acc - widening, u_acc + widening      # (1) again, up to the emergency bound
+        qp.update(l=l, u=u)
+        qp.warm_start(x=least.x, y=np.zeros(layout.m))
+        emergency = budget.solve(qp, cfg.solver_max_iter)
+        if emergency is None or budget.exhausted:
+            qp.update(p_data=data.p_data, q=data.q)
+            return None
+        if emergency.usable or not least.usable:
+            least = emergency
+            rows = _accel_rows(layout, least.x)       # each row widened only as far as (1) needed
+            below, above = np.maximum(l_acc - rows, 0.0), np.maximum(rows - u_acc, 0.0)
+            l[acc] = np.maximum(l_acc - np.where(below > SLACK_TOL, below + LEAST_VIOLATION_MARGIN, 0.0), l_acc - widening)
+            u[acc] = np.minimum(u_acc + np.where(above > SLACK_TOL, above + LEAST_VIOLATION_MARGIN, 0.0), u_acc + widening)
+        else:
+            l[acc], u[acc] = l_acc, u_acc
+    qp.update(p_data=data.p_data, q=data.q)
     if np.isfinite(least.x).all():     # an unconverged (1) still bounds the slack it needs
         needed = np.maximum(least.x[layout.slack_cols[layout.safety_slacks]], 0.0)
         cap = np.where(needed > SLACK_TOL, needed + LEAST_VIOLATION_MARGIN, 0.0)   # unneeded: pinned
