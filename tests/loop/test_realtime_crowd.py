@@ -6,9 +6,11 @@ port. The setpoint stream must hold 20 Hz with no gap over 150 ms, OFFBOARD must
 until the goal, nothing may collide, and the crowd must really be tracked. 60-100 s of wall
 time per scene. Both are marked realtime (``make realtime-test``, run by CI); ``crowd`` selects
 them alone (``make crowd-test``). The corridor's crowd stands beyond its walls and costs the
-planner nothing; its ``c_max`` flight touched the leader in one of three quiet runs (true
-clearance -0.08 m) until real-time plans started from where the drone would be when they take
-over (``Companion.plan_lead_s``; docs/REALTIME.md has the runs).
+planner nothing; its ``c_max`` flight rides the ``c_min`` boundary behind the leader. It touched
+the leader in one of three quiet runs (true clearance -0.08 m) until real-time plans started
+from where the drone would be when they take over (``Companion.plan_lead_s``), and once more
+in CI (-0.25 m) until the corridor's replans could brake harder than ``accel_max`` when no
+plan within it keeps ``c_min`` (``[planner] accel_emergency_mps2``; docs/REALTIME.md has the runs).
 
 Run: ``make realtime-test`` and ``make crowd-test``
 """
