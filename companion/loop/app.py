@@ -395,7 +395,9 @@ class Companion:
         planned = self.executor.position_at(job.t_vehicle_s)   # the position only: no velocity model run
         if planned is not None:
             self.state.tracking.add(job.position - planned)
-        if self.state.goal_reached_t_s is None and self.builder.at_goal(job.position):
+        # the goal is judged on the estimate now, not on where the next plan will start (a
+        # lead later in real time: on the way in that is closer to the goal than the drone)
+        if self.state.goal_reached_t_s is None and self.builder.at_goal(job.position_now):
             self.state.goal_reached_t_s = t_s
             self.sequencer.on_goal_reached(t_s)
             said.append(self._say(t_s, SEV_INFO, "companion: goal reached"))

@@ -43,6 +43,9 @@ class ReplanJob:
         Drone position the plan starts from (NED m: the estimate extrapolated to the request,
         moved along the plan in force up to ``t_vehicle_s``), its planning covariance now
         (m^2), its velocity estimate (m/s) and the waypoint (NED m).
+    position_now : ndarray
+        The drone's position estimate extrapolated to the request (NED m), without the
+        lead: what the goal is judged on (``position`` in lockstep).
     obstacle_positions, obstacle_covs : dict
         Every track's estimate at the request (NED m, m^2), keyed by track.
     realised_contour : dict
@@ -62,6 +65,7 @@ class ReplanJob:
     request: PlanRequest
     warm_start: Plan | None
     position: np.ndarray
+    position_now: np.ndarray
     drone_cov: np.ndarray
     drone_velocity: np.ndarray
     target: np.ndarray
@@ -235,6 +239,7 @@ class RequestBuilder:
             request=request,
             warm_start=warm_start,
             position=position,
+            position_now=position_now,
             drone_cov=cov_now,
             drone_velocity=est.velocity.copy(),
             target=target,

@@ -1,4 +1,6 @@
-"""Real-time plans start where the drone will be when they take over; lockstep plans where it is."""
+"""Real-time plans start where the drone will be when they take over; lockstep plans where it is.
+
+The goal is judged on the estimate now in both."""
 
 from __future__ import annotations
 
@@ -15,6 +17,9 @@ def test_that_each_plan_starts_the_recent_arrival_delay_after_its_request_from_w
     scenario = load_scenario(SCENARIO)
     service = HeldPlanner(Planner(scenario.planner))
     companion = Companion(scenario, planning=service)
+    judged = []                      # the positions the goal is judged on
+    at_goal = companion.builder.at_goal
+    companion.builder.at_goal = lambda position: judged.append(np.array(position)) or at_goal(position)
     t, jobs = 0.0, []
     while len(jobs) < 6 and t < 20.0:
         _feed(companion, t)
@@ -33,7 +38,11 @@ def test_that_each_plan_starts_the_recent_arrival_delay_after_its_request_from_w
         # from where the plan in force takes the drone in those 0.1 s, not from the estimate
         assert 0.0 < np.linalg.norm(job.position - [0.0, 0.0, -5.0]) < 0.1 * 3.0
         assert np.array_equal(job.request.position, job.position)
+        assert job.position_now.tolist() == [0.0, 0.0, -5.0]   # the estimate, without the lead
     assert abs(companion.plan_lead_s() - 0.1) < 1e-9
+    # the goal is judged on the estimate now, never on where the next plan starts (on the way
+    # in, a lead closer to the goal than the drone)
+    assert len(judged) >= 6 and all(p.tolist() == [0.0, 0.0, -5.0] for p in judged)
 
 
 def test_that_the_lead_is_capped_a_setpoint_short_of_the_replan_period():
