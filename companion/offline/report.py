@@ -67,6 +67,7 @@ def truth_report(truth: dict) -> dict:
         "collisions": len(truth.get("collisions", [])),
         "goal_reached": bool(truth.get("goal_reached")),
         "time_to_goal_s": truth.get("time_to_goal_s"),
+        "min_true_goal_distance_m": truth.get("min_goal_distance_m"),
         "min_true_distance_m": min(dist.values()) if dist else None,
         "min_true_clearance_m": min(clear.values()) if clear else None,
         "min_wall_clearance_m": min(walls) if walls else None,
