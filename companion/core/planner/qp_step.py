@@ -214,8 +214,9 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
 
 
 def _needs_slack(layout, x: np.ndarray) -> bool:
-    """Whether the solution ``x`` uses safety slack (above :data:`SLACK_TOL` on some row)."""
-    return bool(np.any(x[layout.slack_cols[layout.safety_slacks]] * layout.slack_scale > SLACK_TOL))
+    """Whether the solution ``x`` uses safety slack (a slack variable above :data:`SLACK_TOL`, as
+    :func:`least_violation` caps them)."""
+    return bool(np.any(x[layout.slack_cols[layout.safety_slacks]] > SLACK_TOL))
 
 
 def _accel_rows(layout, x: np.ndarray) -> np.ndarray:
