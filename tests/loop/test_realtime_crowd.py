@@ -46,7 +46,7 @@ def test_that_the_stream_holds_20_hz_and_the_flight_is_safe_with_200_extra_obsta
     # Hold, never lost it first. In truth the drone came within the goal's tolerance plus
     # what the estimate may be off by: the corridor's plans crawl into the goal (the paper's
     # terminal-only cost), and five runs came to 0.253-0.297 m of a 0.3 m tolerance in truth;
-    # one run in sixteen stopped just outside in truth while its estimate was inside.
+    # one run in sixteen stayed outside in truth while its estimate was inside (by how much was not kept).
     tolerance = 0.3
     assert summary["goal_reached_companion_t_s"] is not None and summary["collided"] is False, (
         summary.get("min_true_clearance_m"), events)
