@@ -3,12 +3,11 @@
 A drone closing on a slower leader faster than ``accel_max`` can stop needs safety slack
 without the emergency bound; with it the replan brakes harder and keeps ``c_min``, using
 the extra acceleration only where the least-violation QP needed it. Nothing changes where
-the hard QP is feasible. Safety figures are recomputed with the overlap module.
+no QP of the replan needs slack within ``accel_max``. Safety figures are recomputed with the
+overlap module.
 """
 
 from __future__ import annotations
-
-import dataclasses
 
 import numpy as np
 import pytest
