@@ -101,3 +101,27 @@ def test_that_a_response_model_has_no_acceleration_rows_to_widen():
     with_bound = Planner(_config(vehicle_response=response, accel_emergency_mps2=EMERGENCY)).solve(req)
     np.testing.assert_array_equal(with_bound.velocities, plain.velocities)
     assert plain.status == with_bound.status
+
+
+def test_that_once_a_replan_needed_the_bound_its_later_steps_start_there(monkeypatch):
+    from companion.core.planner import scp
+
+    solve_qp, calls = scp.solve_qp, []
+
+    def recording(*args, emergency_first=False, **kwargs):
+        step = solve_qp(*args, emergency_first=emergency_first, **kwargs)
+        calls.append((emergency_first, step is not None and step.emergency))
+        return step
+
+    monkeypatch.setattr(scp, "solve_qp", recording)
+    cfg = _config(accel_emergency_mps2=EMERGENCY)
+    req = _closing_request(gap_m=2.6)
+    plan = Planner(cfg).solve(req)
+    assert calls[0] == (False, True)                                      # the first step needed the bound ...
+    assert all(first for first, _ in calls[1:]) and len(calls) >= 2      # ... so the later ones start there
+    assert plan.status == "optimal" and plan.work < cfg.replan_work_budget
+    # starting every step within accel_max instead, the least-slack QP runs to its cap each
+    # time and the replan runs out of budget
+    monkeypatch.setattr(scp, "solve_qp", lambda *a, emergency_first=False, **k: solve_qp(*a, emergency_first=False, **k))
+    again = Planner(cfg).solve(req)
+    assert again.work == cfg.replan_work_budget

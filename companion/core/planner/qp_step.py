@@ -58,6 +58,7 @@ class QpStep:
     admm_iterations : ADMM iterations of every QP solved for this step (hard, and the
         least-violation QPs when the hard one failed).
     least_violation : whether the solution came from the least-violation QPs.
+    emergency : whether those QPs needed ``[planner] accel_emergency_mps2`` (see :func:`least_violation`).
     """
 
     velocities: np.ndarray
@@ -80,6 +81,7 @@ class QpStep:
     solution: QpSolution
     admm_iterations: int = 0
     least_violation: bool = False
+    emergency: bool = False
 
 
 class QpWorkspace:
@@ -125,12 +127,14 @@ def _primal_start(ws: QpWorkspace, v_bar: np.ndarray, p_bar: np.ndarray, lam_bar
 
 def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data: RequestData, v_bar: np.ndarray,
              p_bar: np.ndarray, lam_bar: np.ndarray | None, budget: WorkBudget, *, first: bool,
-             try_hard: bool = True) -> QpStep | None:
+             try_hard: bool = True, emergency_first: bool = False) -> QpStep | None:
     """Linearise at ``(v_bar, p_bar, lam_bar)``, write the QP into ``ws``, solve it (hard, else least violation).
 
     ``try_hard=False`` goes straight to the least-violation QPs (the SCP does so once the
     hard QP of this replan proved infeasible: an infeasible hard QP runs to its iteration
     cap, and the least-violation pair finds the hard solution anyway when one exists).
+    ``emergency_first`` likewise starts the least-violation QPs at the emergency acceleration
+    bound (the SCP does so once a step of this replan needed it).
     Returns None when ``budget`` ran out before a solution (``budget.exhausted`` is then set).
     """
     layout = ws.layout
@@ -177,7 +181,7 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
         qp.warm_start(x=_primal_start(ws, v_bar, p_bar, lam_bar),
                       y=data.y_warm if data.y_warm is not None else np.zeros(layout.m))
     admm_before = budget.admm_iterations
-    sol = None
+    sol, emergency = None, False
     if try_hard:
         sol = budget.solve(qp, cfg.solver_max_iter)
         if sol is None or budget.exhausted:
@@ -187,7 +191,8 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
         hard_status = "skipped" if sol is None else sol.status
         acc = layout.row["accel"].slice
         l_acc, u_acc = l[acc].copy(), u[acc].copy()
-        sol = least_violation(cfg, ws, data, _primal_start(ws, v_bar, p_bar, lam_bar), budget)
+        sol, emergency = least_violation(cfg, ws, data, _primal_start(ws, v_bar, p_bar, lam_bar), budget,
+                                         emergency_first=emergency_first)
         l[acc], u[acc] = l_acc, u_acc        # least_violation may have widened them
         if sol is None:
             return None
@@ -210,6 +215,7 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
         objective=objective, cost=objective - penalty, rows=rows,
         velocity_lower=v_lo, velocity_upper=v_hi, lam_lower=lam_lo, lam_upper=lam_hi,
         wall_upper=data.wall_upper, v0=data.v0, solution=sol, admm_iterations=admm, least_violation=least,
+        emergency=emergency,
     )
 
 
@@ -226,7 +232,7 @@ def _accel_rows(layout, x: np.ndarray) -> np.ndarray:
 
 
 def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: np.ndarray,
-                    budget: WorkBudget) -> QpSolution | None:
+                    budget: WorkBudget, *, emergency_first: bool = False) -> tuple[QpSolution | None, bool]:
     """The QP when its safety rows cannot all hold: violate them as little as possible.
 
     An L1 penalty is exact only above the constraint's multiplier, and here the
@@ -244,14 +250,24 @@ def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: 
     (safety outranks the comfort bound), and (2) then widens each acceleration row only as
     far as that (1) needed, like the slack: the cost alone never buys emergency
     acceleration (with the whole emergency bound in (2) the corridor's drone chased its
-    leader with it and needed more emergencies, measured). The caller restores the rows.
+    leader with it and needed more emergencies, measured). With ``emergency_first`` (an
+    earlier step of the replan needed the bound) (1) is solved widened at once: within
+    ``accel_max`` it ran to its iteration cap at every later step of such a replan, and the
+    budget ran out before the replan had a safe plan (corridor, measured). The caller
+    restores the rows.
 
-    Every QP is solved within ``budget``; returns None when it ran out first.
+    Every QP is solved within ``budget``. Returns the solution (None when the budget ran
+    out first) and whether the acceleration rows were widened for it.
     """
     layout, qp, l, u = ws.layout, ws.qp, ws.l, ws.u
     slack_rows = layout.row["slack"]
     safety = slack_rows.start + layout.safety_slacks
     u[slack_rows.slice] = np.inf
+    widening, acc = ws.template.accel_widening, layout.row["accel"].slice
+    l_acc, u_acc = l[acc].copy(), u[acc].copy()
+    widened = widening is not None and emergency_first
+    if widened:
+        l[acc], u[acc] = l_acc - widening, u_acc + widening
     v_bar = x0[layout.col["V"].slice]
     q_least = np.zeros(layout.n)
     q_least[layout.col["V"].slice] = -2.0 * LEAST_VIOLATION_PROX * v_bar
@@ -264,25 +280,24 @@ def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: 
     least = budget.solve(qp, cfg.solver_max_iter)
     if least is None or budget.exhausted:
         qp.update(p_data=data.p_data, q=data.q)
-        return None
-    widening, acc = ws.template.accel_widening, layout.row["accel"].slice
-    l_acc, u_acc = l[acc].copy(), u[acc].copy()
-    if widening is not None and np.isfinite(least.x).all() and _needs_slack(layout, least.x):
+        return None, widened
+    if widening is not None and not widened and np.isfinite(least.x).all() and _needs_slack(layout, least.x):
         l[acc], u[acc] = l_acc - widening, u_acc + widening      # (1) again, up to the emergency bound
         qp.update(l=l, u=u)
         qp.warm_start(x=least.x, y=np.zeros(layout.m))
         emergency = budget.solve(qp, cfg.solver_max_iter)
         if emergency is None or budget.exhausted:
             qp.update(p_data=data.p_data, q=data.q)
-            return None
+            return None, True
         if emergency.usable or not least.usable:
-            least = emergency
-            rows = _accel_rows(layout, least.x)       # each row widened only as far as (1) needed
-            below, above = np.maximum(l_acc - rows, 0.0), np.maximum(rows - u_acc, 0.0)
-            l[acc] = np.maximum(l_acc - np.where(below > SLACK_TOL, below + LEAST_VIOLATION_MARGIN, 0.0), l_acc - widening)
-            u[acc] = np.minimum(u_acc + np.where(above > SLACK_TOL, above + LEAST_VIOLATION_MARGIN, 0.0), u_acc + widening)
+            least, widened = emergency, True
         else:
             l[acc], u[acc] = l_acc, u_acc
+    if widened and np.isfinite(least.x).all():
+        rows = _accel_rows(layout, least.x)       # each row widened only as far as (1) needed
+        below, above = np.maximum(l_acc - rows, 0.0), np.maximum(rows - u_acc, 0.0)
+        l[acc] = np.maximum(l_acc - np.where(below > SLACK_TOL, below + LEAST_VIOLATION_MARGIN, 0.0), l_acc - widening)
+        u[acc] = np.minimum(u_acc + np.where(above > SLACK_TOL, above + LEAST_VIOLATION_MARGIN, 0.0), u_acc + widening)
     qp.update(p_data=data.p_data, q=data.q)
     if np.isfinite(least.x).all():     # an unconverged (1) still bounds the slack it needs
         needed = np.maximum(least.x[layout.slack_cols[layout.safety_slacks]], 0.0)
@@ -292,13 +307,13 @@ def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: 
         qp.warm_start(x=least.x, y=np.zeros(layout.m))
         sol = budget.solve(qp, cfg.solver_max_iter)
         if sol is None or budget.exhausted:
-            return None
+            return None, widened
         if sol.usable:
-            return sol
+            return sol, widened
         if least.usable:     # (1) is a plan too: least violation, cost not minimised
-            return least
+            return least, widened
     u[slack_rows.slice] = np.inf
     qp.update(l=l, u=u)
     qp.warm_start(x=x0, y=np.zeros(layout.m))
     sol = budget.solve(qp, MAX_ITER)     # the plain soft QP: a plan, and its slack says so
-    return None if sol is None or budget.exhausted else sol
+    return (None if sol is None or budget.exhausted else sol), widened

@@ -169,7 +169,8 @@ class Planner:
         steps: list[QpStep] = []         # every iterate, for the best safe one (_finish)
         for iterations in range(1, cfg.scp_max_iterations + 1):
             new = solve_qp(cfg, form, ws, data, v_bar, p_bar, lam_bar, budget, first=iterations == 1,
-                           try_hard=step is None or not step.least_violation)
+                           try_hard=step is None or not step.least_violation,
+                           emergency_first=step is not None and step.emergency)
             if new is None:              # the work budget ran out before this QP was solved
                 iterations -= 1
                 notes.append(f"work_budget: {budget.used} of {budget.total} units spent")
