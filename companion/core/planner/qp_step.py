@@ -189,11 +189,8 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     least = sol is None or not sol.accurate
     if least:
         hard_status = "skipped" if sol is None else sol.status
-        acc = layout.row["accel"].slice
-        l_acc, u_acc = l[acc].copy(), u[acc].copy()
         sol, emergency = least_violation(cfg, ws, data, _primal_start(ws, v_bar, p_bar, lam_bar), budget,
                                          emergency_first=emergency_first)
-        l[acc], u[acc] = l_acc, u_acc        # least_violation may have widened them
         if sol is None:
             return None
         logger.debug("hard QP %s; soft QP %s", hard_status, sol.status)
@@ -253,18 +250,29 @@ def least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: 
     leader with it and needed more emergencies, measured). With ``emergency_first`` (an
     earlier step of the replan needed the bound) (1) is solved widened at once: within
     ``accel_max`` it ran to its iteration cap at every later step of such a replan, and the
-    budget ran out before the replan had a safe plan (corridor, measured). The caller
-    restores the rows.
+    budget ran out before the replan had a safe plan (corridor, measured). The acceleration
+    rows of ``ws`` are as they were when it returns.
 
     Every QP is solved within ``budget``. Returns the solution (None when the budget ran
     out first) and whether the acceleration rows were widened for it.
     """
+    acc = ws.layout.row["accel"].slice
+    l_acc, u_acc = ws.l[acc].copy(), ws.u[acc].copy()
+    try:
+        return _least_violation(cfg, ws, data, x0, budget, emergency_first, l_acc, u_acc)
+    finally:
+        ws.l[acc], ws.u[acc] = l_acc, u_acc
+
+
+def _least_violation(cfg: PlannerConfig, ws: QpWorkspace, data: RequestData, x0: np.ndarray, budget: WorkBudget,
+                     emergency_first: bool, l_acc: np.ndarray, u_acc: np.ndarray) -> tuple[QpSolution | None, bool]:
+    """:func:`least_violation` with the acceleration rows' nominal bounds ``l_acc``, ``u_acc``
+    (it may widen ``ws``'s rows; the caller restores them)."""
     layout, qp, l, u = ws.layout, ws.qp, ws.l, ws.u
     slack_rows = layout.row["slack"]
     safety = slack_rows.start + layout.safety_slacks
     u[slack_rows.slice] = np.inf
     widening, acc = ws.template.accel_widening, layout.row["accel"].slice
-    l_acc, u_acc = l[acc].copy(), u[acc].copy()
     widened = widening is not None and emergency_first
     if widened:
         l[acc], u[acc] = l_acc - widening, u_acc + widening
