@@ -135,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
     report["planner_process"] = {
         "solved": worker.stats.solved, "superseded": worker.stats.superseded, "errors": worker.stats.errors,
         "max_solve_ms": round(worker.stats.max_solve_s * 1e3, 1),
+        "max_send_ms": round(worker.stats.max_send_s * 1e3, 1), "max_receive_ms": round(worker.stats.max_receive_s * 1e3, 1),
     }
     report["stream_nice"] = stream_nice
     report["signing"] = signing_key is not None

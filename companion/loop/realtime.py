@@ -39,6 +39,7 @@ from companion.core.planner import Planner, PlannerConfig
 from companion.loop.app import Companion
 from companion.loop.backlog import ObstacleBacklog
 from companion.loop.collector import collector_for_real_time
+from companion.loop.gap_probe import GapProbe
 from companion.loop.planning import PlanResult
 from companion.loop.request_builder import ReplanJob
 from companion.loop.tlog_marks import TlogMarks
@@ -65,6 +66,8 @@ class WorkerStats:
     superseded: int = 0
     errors: int = 0
     max_solve_s: float = 0.0
+    max_send_s: float = 0.0      #: longest hand-over of a job to the process (wall, the stream's side)
+    max_receive_s: float = 0.0   #: longest read of a finished plan (wall, the stream's side)
 
 
 def _serve(conn: Connection, config: PlannerConfig, make_planner: Callable[[PlannerConfig], Planner]) -> None:
@@ -161,11 +164,13 @@ class PlanWorker:
         if not self._start(0.0):
             return done
         while self._in_flight is not None and not self._dead and self._poll(0.0):
+            started = time.perf_counter()
             try:
                 seq, plan, error = self._conn.recv()
             except (EOFError, OSError) as exc:
                 self._die(f"planner process gone: {exc}")
                 break
+            self.stats.max_receive_s = max(self.stats.max_receive_s, time.perf_counter() - started)
             job, self._in_flight = self._in_flight, None
             if plan is None:
                 self.stats.errors += 1
@@ -218,11 +223,13 @@ class PlanWorker:
     def _send(self, job: ReplanJob) -> None:
         if self._dead:
             return
+        started = time.perf_counter()
         try:
             self._conn.send((job.seq, job.request, job.warm_start))
         except OSError as exc:
             self._die(f"cannot send to the planner process: {exc}")
             return
+        self.stats.max_send_s = max(self.stats.max_send_s, time.perf_counter() - started)
         self._in_flight = job
 
     def _poll(self, timeout_s: float) -> bool:
@@ -266,7 +273,8 @@ class StreamStats:
     """What the stream thread did, measured on its clock (s).
 
     ``setpoint_gaps_s`` holds every gap between consecutive setpoints while streaming
-    (bounded by the run's length at the setpoint rate).
+    (bounded by the run's length at the setpoint rate); ``probe`` says where the largest
+    one's time went (:mod:`companion.loop.gap_probe`).
     """
 
     ticks: int = 0
@@ -285,10 +293,13 @@ class StreamStats:
     cpu_s: float = 0.0
     collections: int = 0
     max_collection_s: float = 0.0
+    probe: GapProbe = field(default_factory=GapProbe)
 
     def note_setpoint(self, t_s: float) -> None:
-        if self.last_setpoint_s is not None:
-            self.setpoint_gaps_s.append(t_s - self.last_setpoint_s)
+        gap = None if self.last_setpoint_s is None else t_s - self.last_setpoint_s
+        self.probe.setpoint(gap)
+        if gap is not None:
+            self.setpoint_gaps_s.append(gap)
         if self.first_setpoint_s is None:
             self.first_setpoint_s = t_s
         self.last_setpoint_s = t_s
@@ -314,6 +325,8 @@ class StreamStats:
             "inbound_superseded": self.inbound_superseded,
             "obstacle_handling_share": round(self.obstacle_handling_s / self.wall_s, 3) if self.wall_s > 0 else None,
             "stream_cpu_share": round(self.cpu_s / self.wall_s, 3) if self.wall_s > 0 else None,
+            # the largest gap's CPU time, run-queue wait, context switches and longest loop step
+            "setpoint_gap_max_detail": self.probe.largest,
         }
 
 
@@ -396,6 +409,7 @@ def run_realtime(
             now = clock()
             if duration_s is not None and now - start >= duration_s:
                 break
+            step_start = now
             for rx in link.poll():  # the autopilot's messages at once (its first HEARTBEAT makes it known)
                 autopilot = companion.autopilot
                 if rx.msg.get_type() == "HEARTBEAT" or (autopilot is not None and rx.msg.get_srcSystem() == autopilot[0]):
@@ -407,7 +421,9 @@ def run_realtime(
                     others.put(rx)
             link.peer = companion.autopilot  # commands go to the autopilot's address only
             now = clock()
+            stats.probe.step("poll", now - step_start)
             if now >= next_tick:
+                stats.probe.tick_started()
                 companion.on_signatures_rejected(_signatures_rejected((link, *obstacle_links)))
                 if marks is not None:
                     marks.tick(now)
@@ -419,7 +435,9 @@ def run_realtime(
                 if outbox and outbox[-1].get_type() == _SETPOINT:
                     stats.note_setpoint(now)
                 stats.ticks += 1
-                stats.max_tick_s = max(stats.max_tick_s, clock() - now)
+                tick_s = clock() - now
+                stats.max_tick_s = max(stats.max_tick_s, tick_s)
+                stats.probe.step("tick", tick_s)
                 next_tick += period
                 if next_tick < now:
                     stats.late_ticks += 1
@@ -434,9 +452,12 @@ def run_realtime(
                 t_now = clock()
                 budget_s -= t_now - t_prev
                 stats.obstacle_handling_s += t_now - t_prev
+                stats.probe.step("obstacle report", t_now - t_prev)
                 t_prev = t_now
             stats.obstacles_handled_max = max(stats.obstacles_handled_max, handled_in_period)
-            sleep(max(0.0, min(poll_period_s, next_tick - clock())))
+            t_prev = clock()
+            sleep(max(0.0, min(poll_period_s, next_tick - t_prev)))
+            stats.probe.step("sleep", clock() - t_prev)
     stats.wall_s = clock() - start
     stats.cpu_s = time.process_time() - cpu_start
     stats.collections, stats.max_collection_s = pauses.collections, pauses.max_pause_s

@@ -118,6 +118,9 @@ def format_report(report: dict) -> str:
     ]
     width = max(len(label) for _, label in order)
     lines = [f"{label.ljust(width)}  {_fmt(report.get(key))}" for key, label in order if key in report]
+    gap = report.get("setpoint_gap_max_detail")
+    if gap:
+        lines.append(f"{'  where its time went'.ljust(width)}  {_gap_line(gap)}")
     tracking = report.get("tracking_error")
     if tracking:
         lines.append(f"{'strayed from the plan in force'.ljust(width)}  {describe_tracking(tracking)}")
@@ -135,6 +138,20 @@ def format_report(report: dict) -> str:
     for t, text in fs:
         lines.append(f"  t={t:7.2f} s  {text}")
     return "\n".join(lines)
+
+
+def _gap_line(gap: dict) -> str:
+    """The largest setpoint gap's CPU time, run-queue wait, steal and longest loop step, in words."""
+    wait = gap.get("run_queue_wait_ms")
+    parts = [f"{gap['cpu_ms']} ms on a CPU", "run-queue wait unknown" if wait is None else f"{wait} ms waiting for one"]
+    if gap.get("steal_ms") is not None:
+        parts.append(f"{gap['steal_ms']} ms taken by the host (all CPUs)")
+    if gap.get("longest_step"):
+        parts.append(f"longest step {gap['longest_step']} {gap['longest_step_ms']} ms")
+    mono = gap.get("monotonic_gap_ms")
+    if mono is not None and abs(mono - gap["gap_ms"]) > 10.0:
+        parts.append(f"the monotonic clock saw {mono} ms (the wall clock was set)")
+    return ", ".join(parts)
 
 
 def _clock_line(clock: dict) -> str:

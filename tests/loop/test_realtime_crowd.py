@@ -56,4 +56,6 @@ def test_that_the_stream_holds_20_hz_and_the_flight_is_safe_with_200_extra_obsta
     lost = [t for t in events if t.startswith(("PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP"))]
     assert not lost, lost
     assert summary["setpoint_rate_hz"] >= 19.5, summary["setpoint_rate_hz"]
-    assert summary["setpoint_gaps_over_150ms"] == 0, {k: summary[k] for k in ("setpoint_gap_max_ms", "tick_max_ms", "gc_pause_max_ms")}
+    # on failure, where the largest gap's time went (CPU, run-queue wait, host steal, longest loop step)
+    assert summary["setpoint_gaps_over_150ms"] == 0, {k: summary.get(k) for k in (
+        "setpoint_gap_max_ms", "setpoint_gap_max_detail", "tick_max_ms", "gc_pause_max_ms", "planner_process")}

@@ -73,6 +73,9 @@ def test_that_a_stuck_planner_neither_delays_a_setpoint_nor_keeps_an_old_plan_fl
     assert len(setpoints) == stats.ticks == 61  # 0.00 .. 3.00 s
     assert np.allclose(np.diff(times), 0.05, atol=1e-6)
     assert stats.summary()["setpoint_gap_max_ms"] == 50.0
+    # the loop's steps reach the gap probe: on the virtual clock only a sleep takes time (2 ms polls)
+    detail = stats.summary()["setpoint_gap_max_detail"]
+    assert detail["gap_ms"] == 50.0 and detail["longest_step"] == "sleep" and detail["longest_step_ms"] == 2.0
     assert companion.sequencer.phase.name == "ENGAGED"  # no false LINK_LOST while the planner is stuck
     # no request is built while the planner is busy: the stuck job is the last one (none waits to be thrown away)
     assert worker.stats.solved == 1 and worker.stats.submitted == 2 and worker.stats.superseded == 0
