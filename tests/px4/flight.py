@@ -97,7 +97,7 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
     result["companion_report"] = {k: report.get(k) for k in ("phase", "goal_reached_companion_t_s", "replans",
                                                              "min_realised_contour", "replans_with_slack",
                                                              "failed_plans", "plan_status", "failsafe_events",
-                                                             "planner_process", "inbound_superseded", "setpoint_gap_max_ms",
+                                                             "planner_process", "inbound_superseded", "setpoint_gap_max_ms", "setpoint_gap_max_detail",
                                                              "vehicle_clock", "tracking_error", "drift_max_mps")}
     obs = world.obs
     result["world_errors"] = world.errors
