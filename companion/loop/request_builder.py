@@ -198,12 +198,13 @@ class RequestBuilder:
         tracker.prune(t_v)
         times = t0 + tau * np.arange(1, n + 1)
         keys = list(tracker.keys())
-        states = {k: tracker.state(k) for k in keys} if len(keys) > self.loop.max_constrained_tracks \
-            or self.scenario.walls else {}  # read once: 200 tracks cost about 5 ms per pass
-        near, beyond = self._split_beyond_walls(keys, states, perception, t0)
+        # every track's estimate read once, as arrays (row k for keys[k]), when they are set apart or ranked
+        stack = tracker.stacked(keys) if len(keys) > self.loop.max_constrained_tracks or self.scenario.walls else None
+        row = {k: i for i, k in enumerate(keys)}
+        near, beyond = self._split_beyond_walls(keys, stack, perception, t0)
         margin = self.loop.tracking_margin_m2 * np.eye(3)
-        constrained, left_out = self._select(near, states, t0, position, initial_velocity, cov_now + margin)
-        now_left_out = self._estimates_now(left_out + beyond, states, t_v)
+        constrained, left_out = self._select(near, stack, row, t0, position, initial_velocity, cov_now + margin)
+        now_left_out = self._estimates_now(left_out + beyond, stack, row, t_v)
         # every constrained track now (t_v, column 0) and over the horizon, in one pass
         predicted_means, predicted_covs = tracker.predict_many(constrained, np.concatenate([[t_v], times]))
         means, covs = list(predicted_means[:, 1:]), list(predicted_covs[:, 1:])
@@ -253,42 +254,45 @@ class RequestBuilder:
 
     # ------------------------------------------------------------------ many tracks
 
-    def _split_beyond_walls(self, keys: list, states: dict, perception: Perception, t_v: float) -> tuple[list, list]:
+    def _split_beyond_walls(self, keys: list, stack: tuple | None, perception: Perception,
+                            t_v: float) -> tuple[list, list]:
         """The tracks that may reach the drone's side of the walls, and those beyond a wall for the whole horizon.
 
         See :func:`~companion.loop.track_selection.beyond_walls`: a track beyond a wall at
         every step of the request with its ``c_min`` ellipsoid and radius cannot come within
         ``c_min`` of a plan that keeps to the walls, so it needs no rows. Tracker order is kept.
+        ``stack``: :meth:`estimator.ObstacleTracker.stacked` of ``keys``.
         """
         if not keys or not self.scenario.walls:
             return keys, []
         n, tau = self.cfg.horizon_steps, self.cfg.step_s
-        states = [states[k] for k in keys]
-        lags = (t_v + tau * np.arange(1, n + 1))[None, :] - np.array([s.t_s for s in states])[:, None]
+        t_est, mean, cov = stack
+        lags = (t_v + tau * np.arange(1, n + 1))[None, :] - t_est[:, None]
         beyond = beyond_walls(
-            np.array([s.mean for s in states]), np.array([s.cov for s in states]), lags,
+            mean, cov, lags,
             perception.tracker.config.accel_noise_psd_m2ps3,
             self.scenario.walls_normal, self.scenario.walls_offset,
             np.array([self.obstacle_radius(k) for k in keys], dtype=float), self._sigmas,
         )
         return [k for k, b in zip(keys, beyond) if not b], [k for k, b in zip(keys, beyond) if b]
 
-    def _select(self, keys: list, states: dict, t_v: float, position, velocity, cov_now) -> tuple[list, list]:
+    def _select(self, keys: list, stack: tuple | None, row: dict, t_v: float, position, velocity,
+                cov_now) -> tuple[list, list]:
         """The tracks to constrain (tracker order) and those left out (riskiest first), see :mod:`~companion.loop.track_selection`.
 
         With no more tracks than ``max_constrained_tracks`` every track is constrained and
         nothing is ranked. Otherwise the ranking propagates every track's mean and
         covariance (without process noise: a ranking, not a prediction) from its last
         estimate in one vectorised step, so 200 tracks cost about as much as a few.
+        ``stack`` holds every track's estimate, ``keys[k]``'s in its row ``row[keys[k]]``.
         """
         limit = self.loop.max_constrained_tracks
         if len(keys) <= limit:
             return keys, []
         n, tau = self.cfg.horizon_steps, self.cfg.step_s
-        states = [states[k] for k in keys]
-        mean = np.array([s.mean for s in states])           # (P, 6)
-        cov = np.array([s.cov for s in states])             # (P, 6, 6)
-        lag0 = np.maximum(t_v - np.array([s.t_s for s in states]), 0.0)
+        rows = np.array([row[k] for k in keys], dtype=int)
+        mean, cov = stack[1][rows], stack[2][rows]          # (P, 6), (P, 6, 6)
+        lag0 = np.maximum(t_v - stack[0][rows], 0.0)
         steps = tau * np.arange(0, n + 1)
         lags = lag0[:, None] + steps[None, :]               # (P, N+1)
         track_means = mean[:, None, :3] + lags[..., None] * mean[:, None, 3:]
@@ -305,19 +309,23 @@ class RequestBuilder:
         return [keys[i] for i in chosen], [keys[i] for i in rest]
 
     @staticmethod
-    def _estimates_now(keys: list, states: dict, t_v: float) -> dict:
+    def _estimates_now(keys: list, stack: tuple | None, row: dict, t_v: float) -> dict:
         """Position mean (NED m) and covariance (m^2) at ``t_v`` of tracks the planner does not get.
 
-        Propagated from each track's estimate without process noise (the tracker's full
-        prediction costs about 0.2 ms a track, too much for 200 tracks in one tick).
+        Propagated from each track's estimate (``stack``, row ``row[key]``) without process
+        noise, all in one vectorised pass: ``p + lag v`` and ``Ppp + lag (Ppv + Pvp) + lag^2 Pvv``
+        (the tracker's full prediction costs about 0.2 ms a track, too much for 200
+        tracks in one tick; a per-track product cost 1.5 ms for 200).
         """
-        out = {}
-        for key in keys:
-            state = states[key]
-            lag = max(t_v - state.t_s, 0.0)
-            f = np.hstack([np.eye(3), lag * np.eye(3)])  # (3, 6): position after lag
-            out[key] = (f @ state.mean, f @ state.cov @ f.T)
-        return out
+        if not keys:
+            return {}
+        rows = np.array([row[k] for k in keys], dtype=int)
+        mean, cov = stack[1][rows], stack[2][rows]
+        lag = np.maximum(t_v - stack[0][rows], 0.0)
+        position = mean[:, :3] + lag[:, None] * mean[:, 3:]
+        lag = lag[:, None, None]
+        position_cov = cov[:, :3, :3] + lag * (cov[:, :3, 3:] + cov[:, 3:, :3]) + lag * lag * cov[:, 3:, 3:]
+        return {key: (position[i], position_cov[i]) for i, key in enumerate(keys)}
 
     def _realised_contour(self, position, cov_now, keys, now_pos, now_cov) -> dict:
         """Contour of touch between the drone's estimate and each track's, keyed by track."""

@@ -167,6 +167,29 @@ def test_that_predicting_many_tracks_at_once_gives_each_track_s_own_numbers():
         tr.predict_many(keys, [np.nan])
 
 
+
+def test_that_the_stacked_estimates_are_each_track_s_state_and_copies():
+    rng = np.random.default_rng(8)
+    tr = ObstacleTracker(TrackerConfig())
+    keys = [(201 + i, 1) for i in range(4)]
+    for k in range(6):
+        for i, key in enumerate(keys):
+            if k < 2 + i:
+                tr.update(key, 0.1 * k + 0.01 * i, rng.normal(size=3) + [i, 0.1 * k, -5.0], None, R)
+    order = keys[::-1]     # any order of the keys asked for
+    t, mean, cov = tr.stacked(order)
+    assert t.shape == (4,) and mean.shape == (4, 6) and cov.shape == (4, 6, 6)
+    for k, key in enumerate(order):
+        state = tr.state(key)
+        assert t[k] == state.t_s and np.array_equal(mean[k], state.mean) and np.array_equal(cov[k], state.cov)
+    cov[0, 0, 0] = 1e9     # a copy: the track is untouched
+    assert tr.state(order[0]).cov[0, 0] != 1e9
+    t0, m0, c0 = tr.stacked([])
+    assert t0.shape == (0,) and m0.shape == (0, 6) and c0.shape == (0, 6, 6)
+    with pytest.raises(UnknownTrackError):
+        tr.stacked([keys[0], "nobody"])
+
+
 finite = st.floats(-1e4, 1e4, allow_nan=False)
 vec3 = st.lists(finite, min_size=3, max_size=3)
 spd = st.tuples(st.lists(st.floats(-1.0, 1.0), min_size=9, max_size=9), st.floats(1e-4, 10.0)).map(

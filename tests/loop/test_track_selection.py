@@ -166,3 +166,27 @@ def test_that_in_a_corridor_the_crowd_outside_its_walls_needs_no_rows_and_a_trac
     assert len(job.tracks_beyond_walls) == 200 and not job.tracks_unconstrained
     assert job.request.num_obstacles == 2 + len(scenario.static_obstacles)
     assert len(job.realised_contour) == 202  # still measured, every one
+
+
+def test_that_the_left_out_tracks_estimates_now_are_each_track_s_estimate_moved_on_without_noise():
+    """The vectorised pass gives, per track, ``F x`` and ``F P F'`` with ``F = [I, lag I]`` (lag >= 0)."""
+    from companion.loop.request_builder import RequestBuilder
+
+    rng = np.random.default_rng(11)
+    keys = [("a", i) for i in range(6)]
+    t_est = np.array([0.0, 0.3, 1.0, 1.2, 2.5, 3.0])      # the last two are newer than t_v: lag 0
+    mean = rng.normal(size=(6, 6))
+    m = rng.normal(size=(6, 6, 6))
+    cov = m @ np.swapaxes(m, 1, 2) + 0.1 * np.eye(6)
+    row = {k: 5 - i for i, k in enumerate(keys)}        # rows need not follow the keys' order
+    stack = (t_est[::-1].copy(), mean[::-1].copy(), cov[::-1].copy())
+    t_v = 2.0
+    now = RequestBuilder._estimates_now(keys[1:], stack, row, t_v)
+    assert list(now) == keys[1:]
+    for i, key in enumerate(keys[1:], 1):
+        lag = max(t_v - t_est[i], 0.0)
+        f = np.hstack([np.eye(3), lag * np.eye(3)])
+        pos, pos_cov = now[key]
+        assert np.allclose(pos, f @ mean[i], rtol=1e-13, atol=1e-13)
+        assert np.allclose(pos_cov, f @ cov[i] @ f.T, rtol=1e-13, atol=1e-12)
+    assert RequestBuilder._estimates_now([], None, {}, t_v) == {}
