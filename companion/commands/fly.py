@@ -13,7 +13,7 @@ import time
 from companion.commands._argtypes import non_negative_seconds, output_file, positive_number, positive_seconds
 from companion.errors import CompanionError, ConfigError
 from companion.loop.app import Companion
-from companion.loop.realtime import PlanWorker, raise_stream_priority, run_realtime
+from companion.loop.realtime import STREAM_FIFO_PRIORITY, PlanWorker, raise_stream_priority, run_realtime
 from companion.loop.traffic_config import obstacle_link_name
 from companion.mavlink.link import DEFAULT_URL, open_link
 from companion.mavlink.tlog import TlogWriter
@@ -61,6 +61,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="MAVLink 2 signing: the 32-byte key as 64 hex digits in FILE (sign all, reject unsigned)")
     p.add_argument("--signing-key-env", metavar="NAME",
                    help="MAVLink 2 signing: the key (64 hex digits) in environment variable NAME")
+    p.add_argument("--no-realtime-priority", action="store_true",
+                   help="keep the setpoint stream in the ordinary scheduling class (default: SCHED_FIFO "
+                        f"priority {STREAM_FIFO_PRIORITY} where permitted, as well as nice -10)")
     p.add_argument("--json", action="store_true", help="print the run report as JSON")
     p.set_defaults(func=run)
 
@@ -98,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
         worker.close()
         raise CompanionError(f"the planning process did not start within {_PLANNER_START_S:.0f} s")
     companion = Companion(scenario, offboard=offboard, planning=worker)
-    stream_nice = raise_stream_priority()  # the planning process, started above, keeps its priority
+    # the planning process, started above, keeps its priority
+    stream_nice, stream_fifo = raise_stream_priority(fifo_priority=None if args.no_realtime_priority else STREAM_FIFO_PRIORITY)
 
     def stop(c: Companion) -> bool:
         """Once the vehicle holds after --exit-after-goal (the sequencer hands it back), or on giving up."""
@@ -138,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
         "max_send_ms": round(worker.stats.max_send_s * 1e3, 1), "max_receive_ms": round(worker.stats.max_receive_s * 1e3, 1),
     }
     report["stream_nice"] = stream_nice
+    report["stream_fifo_priority"] = stream_fifo
     report["signing"] = signing_key is not None
     report["signature_rejected"] = link.stats.signature_rejected
     if args.json:

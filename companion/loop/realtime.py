@@ -55,6 +55,9 @@ _MAX_BACKLOG = 2000            # obstacle sources waiting; beyond, the longest-w
 OBSTACLE_SHARE = 0.1
 #: Nice steps :func:`raise_stream_priority` takes the stream up by, when permitted.
 STREAM_PRIORITY_STEPS = 10
+#: Real-time (``SCHED_FIFO``) priority :func:`raise_stream_priority` gives the stream, when
+#: permitted: low among Linux's 1-99, above every ordinary process.
+STREAM_FIFO_PRIORITY = 10
 
 
 @dataclass
@@ -250,22 +253,41 @@ def _signatures_rejected(links: Sequence[Link]) -> int:
     return sum(getattr(getattr(link, "stats", None), "signature_rejected", 0) for link in links)
 
 
-def raise_stream_priority(steps: int = STREAM_PRIORITY_STEPS) -> int | None:
-    """Lower this process's nice value by ``steps`` (a higher CPU priority) if allowed; the new value or None.
+def raise_stream_priority(steps: int = STREAM_PRIORITY_STEPS,
+                          fifo_priority: int | None = STREAM_FIFO_PRIORITY) -> tuple[int | None, int | None]:
+    """Give this process the CPU before ordinary processes, as far as allowed: ``(nice, fifo)``.
 
-    The stream needs little CPU (about a tenth of a core with 200 tracks) but needs it on
-    time: on a loaded machine a process at the default priority waited up to 0.8 s for a
-    CPU. Call it after the :class:`PlanWorker` has started, so the planning process keeps
-    the default priority. Needs the privilege to lower a nice value (root or
-    CAP_SYS_NICE, or an ``RLIMIT_NICE`` allowing it); without it nothing changes.
+    ``nice``: the process's nice value after lowering it by ``steps`` (None: not permitted).
+    ``fifo``: the real-time priority it then runs at in Linux's ``SCHED_FIFO`` class (None:
+    not asked, not permitted or not on this platform); processes it starts later return
+    to the ordinary class (``SCHED_RESET_ON_FORK``).
+
+    The stream needs little CPU (about a seventh of a core with 200 tracks) but needs it
+    on time. At the default priority on a loaded machine it waited up to 0.8 s for a CPU.
+    At nice -10 on a quiet one it still waited: 3 to 5 ms in the kernel's run queue each
+    time a job it handed over woke the planning process on its CPU, and once 38.6 ms in a
+    gap of 80 ms (docs/REALTIME.md). Ordinary processes never take a CPU from a
+    ``SCHED_FIFO`` one; the stream sleeps between ticks and every step of its loop is
+    bounded, so it cannot hold a CPU (Linux also keeps 5 % of each second for ordinary
+    processes). Call it after the :class:`PlanWorker` has started, so the planning process
+    keeps the default priority. Needs root or CAP_SYS_NICE (or an ``RLIMIT_NICE`` and
+    ``RLIMIT_RTPRIO`` allowing it); without it nothing changes.
     """
+    nice = fifo = None
     try:
         current = os.getpriority(os.PRIO_PROCESS, 0)
         os.setpriority(os.PRIO_PROCESS, 0, current - int(steps))
-        return os.getpriority(os.PRIO_PROCESS, 0)
+        nice = os.getpriority(os.PRIO_PROCESS, 0)
     except (AttributeError, OSError) as exc:  # no such call on this platform, or not permitted
-        logger.info("stream priority unchanged (%s)", exc)
-        return None
+        logger.info("stream nice value unchanged (%s)", exc)
+    if fifo_priority is not None:
+        try:
+            policy = os.SCHED_FIFO | getattr(os, "SCHED_RESET_ON_FORK", 0)
+            os.sched_setscheduler(0, policy, os.sched_param(int(fifo_priority)))
+            fifo = os.sched_getparam(0).sched_priority
+        except (AttributeError, OSError) as exc:
+            logger.info("stream stays in the ordinary scheduling class (%s)", exc)
+    return nice, fifo
 
 
 @dataclass
