@@ -13,7 +13,7 @@ import time
 from companion.commands._argtypes import non_negative_seconds, output_file, positive_number, positive_seconds
 from companion.errors import CompanionError, ConfigError
 from companion.loop.app import Companion
-from companion.loop.realtime import STREAM_FIFO_PRIORITY, PlanWorker, raise_stream_priority, run_realtime
+from companion.loop.realtime import STREAM_FIFO_PRIORITY, PlanWorker, run_realtime, stream_priority
 from companion.loop.traffic_config import obstacle_link_name
 from companion.mavlink.link import DEFAULT_URL, open_link
 from companion.mavlink.tlog import TlogWriter
@@ -101,8 +101,6 @@ def run(args: argparse.Namespace) -> int:
         worker.close()
         raise CompanionError(f"the planning process did not start within {_PLANNER_START_S:.0f} s")
     companion = Companion(scenario, offboard=offboard, planning=worker)
-    # the planning process, started above, keeps its priority
-    stream_nice, stream_fifo = raise_stream_priority(fifo_priority=None if args.no_realtime_priority else STREAM_FIFO_PRIORITY)
 
     def stop(c: Companion) -> bool:
         """Once the vehicle holds after --exit-after-goal (the sequencer hands it back), or on giving up."""
@@ -122,6 +120,9 @@ def run(args: argparse.Namespace) -> int:
             obstacle_links.append(open_link(url, clock=microsecond_clock, signing_key=signing_key,
                                             name=obstacle_link_name(i), receive_only=True))
             resources.callback(obstacle_links[-1].close)
+        # the stream's priority for the stream only; the planning process, started above, keeps its own
+        stream_nice, stream_fifo = resources.enter_context(
+            stream_priority(fifo_priority=None if args.no_realtime_priority else STREAM_FIFO_PRIORITY))
         started = microsecond_clock()
         try:
             stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock,

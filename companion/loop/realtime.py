@@ -23,13 +23,14 @@ are one mechanism; the obstacle backlog is its own module, :mod:`companion.loop.
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import logging
 import math
 import multiprocessing
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Callable
@@ -288,6 +289,31 @@ def raise_stream_priority(steps: int = STREAM_PRIORITY_STEPS,
         except (AttributeError, OSError) as exc:
             logger.info("stream stays in the ordinary scheduling class (%s)", exc)
     return nice, fifo
+
+
+@contextlib.contextmanager
+def stream_priority(steps: int = STREAM_PRIORITY_STEPS,
+                    fifo_priority: int | None = STREAM_FIFO_PRIORITY) -> Iterator[tuple[int | None, int | None]]:
+    """:func:`raise_stream_priority` for the block, then the process's nice value and
+    scheduling class as they were (a caller that goes on after the stream, a test, keeps
+    no real-time priority)."""
+    saved = None
+    try:
+        saved = (os.getpriority(os.PRIO_PROCESS, 0), os.sched_getscheduler(0), os.sched_getparam(0))
+    except (AttributeError, OSError):  # no such calls on this platform
+        pass
+    nice, fifo = raise_stream_priority(steps, fifo_priority)
+    try:
+        yield nice, fifo
+    finally:
+        if saved is not None:
+            try:
+                if fifo is not None:
+                    os.sched_setscheduler(0, saved[1], saved[2])
+                if nice is not None:
+                    os.setpriority(os.PRIO_PROCESS, 0, saved[0])   # a higher nice value: always permitted
+            except OSError as exc:
+                logger.warning("stream priority not restored (%s)", exc)
 
 
 @dataclass

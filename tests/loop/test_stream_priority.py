@@ -1,8 +1,9 @@
-"""The stream's CPU priority (:func:`companion.loop.realtime.raise_stream_priority`), tried in a child process.
+"""The stream's CPU priority (:func:`companion.loop.realtime.stream_priority`), tried in a child process.
 
 Where permitted (root or CAP_SYS_NICE) the stream runs in ``SCHED_FIFO`` at
-``STREAM_FIFO_PRIORITY`` and a process it starts afterwards is back in the ordinary class;
-where not, nothing changes and the result says so. Never in the test process itself.
+``STREAM_FIFO_PRIORITY`` and a process it starts meanwhile is back in the ordinary class;
+where not, nothing changes and the result says so. After the block the process's nice
+value and class are as before. Never in the test process itself.
 """
 
 from __future__ import annotations
@@ -15,18 +16,21 @@ import pytest
 
 _PROBE = r"""
 import json, os, sys
-from companion.loop.realtime import raise_stream_priority
+from companion.loop.realtime import stream_priority
 fifo_priority = None if sys.argv[1] == "none" else int(sys.argv[1])
-nice, fifo = raise_stream_priority(fifo_priority=fifo_priority)
-r, w = os.pipe()
-pid = os.fork()
-if pid == 0:
-    os.write(w, str(os.sched_getscheduler(0)).encode())
-    os._exit(0)
-os.waitpid(pid, 0)
-child = int(os.read(r, 16))
-print(json.dumps({"nice": nice, "fifo": fifo, "policy": os.sched_getscheduler(0), "child": child,
-                  "FIFO": os.SCHED_FIFO, "OTHER": os.SCHED_OTHER, "rtprio": os.sched_getparam(0).sched_priority}))
+nice_before = os.getpriority(os.PRIO_PROCESS, 0)
+with stream_priority(fifo_priority=fifo_priority) as (nice, fifo):
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.write(w, str(os.sched_getscheduler(0)).encode())
+        os._exit(0)
+    os.waitpid(pid, 0)
+    child = int(os.read(r, 16))
+    policy, rtprio = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
+print(json.dumps({"nice": nice, "fifo": fifo, "policy": policy, "child": child, "rtprio": rtprio,
+                  "FIFO": os.SCHED_FIFO, "OTHER": os.SCHED_OTHER, "policy_after": os.sched_getscheduler(0),
+                  "nice_before": nice_before, "nice_after": os.getpriority(os.PRIO_PROCESS, 0)}))
 """
 
 
@@ -47,9 +51,12 @@ def test_the_stream_runs_before_ordinary_processes_where_permitted_and_its_child
         assert got["child"] == got["OTHER"]         # reset on fork
     else:                                # not permitted: nothing changed, and the result says so
         assert got["policy"] == got["OTHER"] and got["rtprio"] == 0
+    # afterwards as before
+    assert got["policy_after"] == got["OTHER"] and got["nice_after"] == got["nice_before"]
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="sched_getscheduler is Linux's")
 def test_without_a_real_time_priority_the_stream_stays_in_the_ordinary_class():
     got = _probe("none")
     assert got["fifo"] is None and got["policy"] == got["OTHER"] and got["rtprio"] == 0
+    assert got["nice_after"] == got["nice_before"]
