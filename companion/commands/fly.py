@@ -13,7 +13,8 @@ import time
 from companion.commands._argtypes import non_negative_seconds, output_file, positive_number, positive_seconds
 from companion.errors import CompanionError, ConfigError
 from companion.loop.app import Companion
-from companion.loop.realtime import STREAM_FIFO_PRIORITY, PlanWorker, run_realtime, stream_priority
+from companion.loop.realtime import PlanWorker, run_realtime
+from companion.loop.stream_priority import STREAM_FIFO_PRIORITY, stream_priority
 from companion.loop.traffic_config import obstacle_link_name
 from companion.mavlink.link import DEFAULT_URL, open_link
 from companion.mavlink.tlog import TlogWriter

@@ -2,7 +2,7 @@
 
 A setpoint gap well over the period that falls outside any tick and any garbage
 collection (two quiet runs of the corridor's crowd flight each had one of 188 and
-192 ms) has three possible causes, and each leaves a different trace:
+192 ms) has four possible causes, and each leaves a different trace:
 
 - the stream computed through it (its CPU time over the gap is close to the gap);
 - it was ready but waited for a CPU (the scheduler's run-queue wait is close to the gap:

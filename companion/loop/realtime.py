@@ -18,19 +18,20 @@ now, as a late setpoint is better than a burst of stale ones. Every setpoint's s
 is measured (:class:`StreamStats`: rate and the largest gap).
 
 (Just over 400 lines: the stream loop, the planning process it feeds and what both measure
-are one mechanism; the obstacle backlog is its own module, :mod:`companion.loop.backlog`.)
+are one mechanism; the obstacle backlog, the largest gap's probe and the stream's CPU
+priority are their own modules: :mod:`companion.loop.backlog`,
+:mod:`companion.loop.gap_probe`, :mod:`companion.loop.stream_priority`.)
 """
 
 from __future__ import annotations
 
-import contextlib
 import gc
 import logging
 import math
 import multiprocessing
 import os
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Callable
@@ -54,11 +55,6 @@ _WORKER_JOIN_S = 2.0
 _MAX_BACKLOG = 2000            # obstacle sources waiting; beyond, the longest-waiting is dropped
 #: Default share of each setpoint period the stream may spend handling obstacle reports.
 OBSTACLE_SHARE = 0.1
-#: Nice steps :func:`raise_stream_priority` takes the stream up by, when permitted.
-STREAM_PRIORITY_STEPS = 10
-#: Real-time (``SCHED_FIFO``) priority :func:`raise_stream_priority` gives the stream, when
-#: permitted: low among Linux's 1-99, above every ordinary process.
-STREAM_FIFO_PRIORITY = 10
 
 
 @dataclass
@@ -252,68 +248,6 @@ class PlanWorker:
 def _signatures_rejected(links: Sequence[Link]) -> int:
     """Packets the links dropped for a bad or missing signature (a stand-in link without counters: 0)."""
     return sum(getattr(getattr(link, "stats", None), "signature_rejected", 0) for link in links)
-
-
-def raise_stream_priority(steps: int = STREAM_PRIORITY_STEPS,
-                          fifo_priority: int | None = STREAM_FIFO_PRIORITY) -> tuple[int | None, int | None]:
-    """Give this process the CPU before ordinary processes, as far as allowed: ``(nice, fifo)``.
-
-    ``nice``: the process's nice value after lowering it by ``steps`` (None: not permitted).
-    ``fifo``: the real-time priority it then runs at in Linux's ``SCHED_FIFO`` class (None:
-    not asked, not permitted or not on this platform); processes it starts later return
-    to the ordinary class (``SCHED_RESET_ON_FORK``).
-
-    The stream needs little CPU (about a seventh of a core with 200 tracks) but needs it
-    on time. At the default priority on a loaded machine it waited up to 0.8 s for a CPU.
-    At nice -10 on a quiet one it still waited: 3 to 5 ms in the kernel's run queue each
-    time a job it handed over woke the planning process on its CPU, and once 38.6 ms in a
-    gap of 80 ms (docs/REALTIME.md). Ordinary processes never take a CPU from a
-    ``SCHED_FIFO`` one; the stream sleeps between ticks and every step of its loop is
-    bounded, so it cannot hold a CPU (Linux also keeps 5 % of each second for ordinary
-    processes). Call it after the :class:`PlanWorker` has started, so the planning process
-    keeps the default priority. Needs root or CAP_SYS_NICE (or an ``RLIMIT_NICE`` and
-    ``RLIMIT_RTPRIO`` allowing it); without it nothing changes.
-    """
-    nice = fifo = None
-    try:
-        current = os.getpriority(os.PRIO_PROCESS, 0)
-        os.setpriority(os.PRIO_PROCESS, 0, current - int(steps))
-        nice = os.getpriority(os.PRIO_PROCESS, 0)
-    except (AttributeError, OSError) as exc:  # no such call on this platform, or not permitted
-        logger.info("stream nice value unchanged (%s)", exc)
-    if fifo_priority is not None:
-        try:
-            policy = os.SCHED_FIFO | getattr(os, "SCHED_RESET_ON_FORK", 0)
-            os.sched_setscheduler(0, policy, os.sched_param(int(fifo_priority)))
-            fifo = os.sched_getparam(0).sched_priority
-        except (AttributeError, OSError) as exc:
-            logger.info("stream stays in the ordinary scheduling class (%s)", exc)
-    return nice, fifo
-
-
-@contextlib.contextmanager
-def stream_priority(steps: int = STREAM_PRIORITY_STEPS,
-                    fifo_priority: int | None = STREAM_FIFO_PRIORITY) -> Iterator[tuple[int | None, int | None]]:
-    """:func:`raise_stream_priority` for the block, then the process's nice value and
-    scheduling class as they were (a caller that goes on after the stream, a test, keeps
-    no real-time priority)."""
-    saved = None
-    try:
-        saved = (os.getpriority(os.PRIO_PROCESS, 0), os.sched_getscheduler(0), os.sched_getparam(0))
-    except (AttributeError, OSError):  # no such calls on this platform
-        pass
-    nice, fifo = raise_stream_priority(steps, fifo_priority)
-    try:
-        yield nice, fifo
-    finally:
-        if saved is not None:
-            try:
-                if fifo is not None:
-                    os.sched_setscheduler(0, saved[1], saved[2])
-                if nice is not None:
-                    os.setpriority(os.PRIO_PROCESS, 0, saved[0])   # a higher nice value: always permitted
-            except OSError as exc:
-                logger.warning("stream priority not restored (%s)", exc)
 
 
 @dataclass

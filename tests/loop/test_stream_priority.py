@@ -1,4 +1,4 @@
-"""The stream's CPU priority (:func:`companion.loop.realtime.stream_priority`), tried in a child process.
+"""The stream's CPU priority (:func:`companion.loop.stream_priority.stream_priority`), tried in a child process.
 
 Where permitted (root or CAP_SYS_NICE) the stream runs in ``SCHED_FIFO`` at
 ``STREAM_FIFO_PRIORITY`` and a process it starts meanwhile is back in the ordinary class;
@@ -16,7 +16,7 @@ import pytest
 
 _PROBE = r"""
 import json, os, sys
-from companion.loop.realtime import stream_priority
+from companion.loop.stream_priority import stream_priority
 fifo_priority = None if sys.argv[1] == "none" else int(sys.argv[1])
 nice_before = os.getpriority(os.PRIO_PROCESS, 0)
 with stream_priority(fifo_priority=fifo_priority) as (nice, fifo):
@@ -42,7 +42,7 @@ def _probe(fifo_priority: str) -> dict:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="SCHED_FIFO and sched_getscheduler are Linux's")
 def test_the_stream_runs_before_ordinary_processes_where_permitted_and_its_children_do_not():
-    from companion.loop.realtime import STREAM_FIFO_PRIORITY
+    from companion.loop.stream_priority import STREAM_FIFO_PRIORITY
 
     got = _probe(str(STREAM_FIFO_PRIORITY))
     if got["fifo"] is not None:          # permitted (root here)
