@@ -2,7 +2,7 @@
 
 Each module ``companion/commands/<name>.py`` defines ``register(subparsers)`` which adds
 one (or more) subparsers and sets ``func`` on them; ``func(args) -> int`` is the exit
-code. Only this entry point configures logging.
+code. Only this entry point configures logging, and the BLAS thread pools (one thread).
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import pkgutil
 from importlib import metadata
 import sys
@@ -19,6 +20,24 @@ from companion import commands as _commands
 from companion.errors import CompanionError
 
 logger = logging.getLogger(__name__)
+
+#: Thread-pool sizes of the BLAS libraries numpy and scipy may load, set to one thread unless
+#: the environment already says otherwise. Every matrix here is small (3x3 to 6x6 in the
+#: filters and the response model; OSQP factors the QP itself), so extra BLAS threads only
+#: wait, spinning: against PX4 SITL the process of ``fly`` used 55 to 61 % of a core with
+#: OpenBLAS's default threads and 11 % with one (docs/REALTIME.md).
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _one_blas_thread() -> None:
+    """Ask for one BLAS thread (:data:`BLAS_THREAD_VARIABLES`) before numpy is first imported.
+
+    Read by the BLAS library when it loads, so it acts only in a process that has not
+    imported numpy yet (``companion ...``, ``python -m companion.cli``), and in every
+    process started from it (the planning process, mavsim).
+    """
+    for name in BLAS_THREAD_VARIABLES:
+        os.environ.setdefault(name, "1")
 
 
 def _version() -> str:
@@ -56,6 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    _one_blas_thread()   # before the commands import numpy
     parser = build_parser()
     args = parser.parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)

@@ -98,6 +98,7 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
                                                              "min_realised_contour", "replans_with_slack",
                                                              "failed_plans", "plan_status", "failsafe_events",
                                                              "planner_process", "inbound_superseded", "setpoint_gap_max_ms", "setpoint_gap_max_detail",
+                                                             "setpoint_gap_max_at_s", "tick_max_ms", "stream_cpu_share", "stream_fifo_priority",
                                                              "vehicle_clock", "tracking_error", "drift_max_mps")}
     obs = world.obs
     result["world_errors"] = world.errors
