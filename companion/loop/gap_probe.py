@@ -4,7 +4,9 @@ A setpoint gap well over the period that falls outside any tick and any garbage
 collection (two quiet runs of the corridor's crowd flight each had one of 188 and
 192 ms) has four possible causes, and each leaves a different trace:
 
-- the stream computed through it (its CPU time over the gap is close to the gap);
+- the stream computed through it (its CPU time over the gap is close to the gap; the
+  reading is the process's, all its threads: against PX4 SITL it was OpenBLAS's idle
+  threads spinning, while the stream slept, until ``companion`` asked for one BLAS thread);
 - it was ready but waited for a CPU (the scheduler's run-queue wait is close to the gap:
   the machine, not the stream);
 - it was blocked in a system call or asleep past its wake-up (neither: a voluntary
@@ -16,8 +18,8 @@ and a gap on the wall clock that the monotonic clock does not see is the wall cl
 being set, not a gap (the stream stamps with the wall clock, as the tlog does).
 
 :class:`GapProbe` reads the process's CPU time, the kernel's run-queue wait
-(``/proc/self/schedstat``, Linux; the stream is the process's one thread), its
-context switches, the machine's steal time (``/proc/stat``, all CPUs) and the monotonic
+(``/proc/self/schedstat``, Linux: the main thread's, which runs the stream), its
+context switches (all threads), the machine's steal time (``/proc/stat``, all CPUs) and the monotonic
 clock at every setpoint, and keeps, for the largest gap only, their change over the gap
 and the longest single step of the loop within it (bounded: one record). A reading
 costs about 30 microseconds (two small files opened, read and closed), at the setpoint
