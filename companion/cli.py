@@ -25,7 +25,7 @@ logger = logging.getLogger(__name__)
 #: the environment already says otherwise. Every matrix here is small (3x3 to 6x6 in the
 #: filters and the response model; OSQP factors the QP itself), so extra BLAS threads only
 #: wait, spinning: against PX4 SITL the process of ``fly`` used 55 to 61 % of a core with
-#: OpenBLAS's default threads and 11 % with one (docs/REALTIME.md).
+#: OpenBLAS's default threads and 11 to 13 % with one (docs/REALTIME.md).
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
