@@ -145,7 +145,8 @@ def test_that_predict_validates_times_and_keys():
         tr.state("nobody")
 
 
-def test_that_predicting_many_tracks_at_once_gives_each_track_s_own_numbers():
+def _five_tracks_heard_at_different_times() -> tuple[ObstacleTracker, list]:
+    """A tracker with five tracks, each last updated at a different time, and their keys."""
     rng = np.random.default_rng(7)
     tr = ObstacleTracker(TrackerConfig())
     keys = [(101 + i, 1) for i in range(5)]
@@ -153,6 +154,11 @@ def test_that_predicting_many_tracks_at_once_gives_each_track_s_own_numbers():
         for i, key in enumerate(keys):
             if k < 3 + i:   # tracks last heard at different times
                 tr.update(key, 0.1 * k + 0.01 * i, rng.normal(size=3) + [i, 0.1 * k, -5.0], None, R)
+    return tr, keys
+
+
+def test_that_predicting_many_tracks_at_once_gives_each_track_s_own_numbers():
+    tr, keys = _five_tracks_heard_at_different_times()
     times = 1.0 + 0.3 * np.arange(12)
     means, covs = tr.predict_many(keys, times)
     assert means.shape == (5, 12, 3) and covs.shape == (5, 12, 3, 3)
@@ -167,18 +173,12 @@ def test_that_predicting_many_tracks_at_once_gives_each_track_s_own_numbers():
         tr.predict_many(keys, [np.nan])
 
 
-
 def test_that_the_stacked_estimates_are_each_track_s_state_and_copies():
-    rng = np.random.default_rng(8)
-    tr = ObstacleTracker(TrackerConfig())
-    keys = [(201 + i, 1) for i in range(4)]
-    for k in range(6):
-        for i, key in enumerate(keys):
-            if k < 2 + i:
-                tr.update(key, 0.1 * k + 0.01 * i, rng.normal(size=3) + [i, 0.1 * k, -5.0], None, R)
+    tr, keys = _five_tracks_heard_at_different_times()
     order = keys[::-1]     # any order of the keys asked for
     t, mean, cov = tr.stacked(order)
-    assert t.shape == (4,) and mean.shape == (4, 6) and cov.shape == (4, 6, 6)
+    assert t.shape == (5,) and mean.shape == (5, 6) and cov.shape == (5, 6, 6)
+    assert len(set(t)) == 5     # each last heard at its own time
     for k, key in enumerate(order):
         state = tr.state(key)
         assert t[k] == state.t_s and np.array_equal(mean[k], state.mean) and np.array_equal(cov[k], state.cov)
