@@ -24,6 +24,9 @@ from estimator.results import Reason
 
 logger = logging.getLogger(__name__)
 
+#: Largest magnitude whose double does not overflow: ``0.5 * (x + x) == x`` up to it.
+_HALF_MAX = np.finfo(float).max / 2.0
+
 H_POSITION = np.hstack([np.eye(3), np.zeros((3, 3))])
 """Measurement matrix of a position-only report, (3, 6)."""
 H_POSITION_VELOCITY = np.eye(6)
@@ -138,6 +141,9 @@ def _noise(cov: np.ndarray | None, std: float, name: str) -> np.ndarray:
         problem = problem_3x3(rows)
         if problem is not None:
             raise MeasurementRejected(Reason.INVALID_COVARIANCE, f"{name} {problem}: {rows}")
+        (a, b, c_), (d, e, f), (g, h, i) = rows
+        if b == d and c_ == g and f == h and max(abs(a), abs(b), abs(c_), abs(e), abs(f), abs(i)) <= _HALF_MAX:
+            return c.copy()     # already symmetric: (C + C') / 2 is C, bit for bit (x + x does not overflow)
         # (C + C') / 2 on the Python floats already read: symmetrise's bits, a third of its time
         return np.array([[0.5 * (rows[i][j] + rows[j][i]) for j in range(3)] for i in range(3)])
     raise MeasurementRejected(
