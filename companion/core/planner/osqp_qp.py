@@ -17,12 +17,6 @@ iterations per replan, all QPs of its SCP):
   unit-gradient rows, slacks scaled by ``QpLayout.slack_scale``). With the reset but
   Ruiz scaling on: p99 490, largest 900; with both settings: median 50, p99 150,
   largest 200. Each solve now depends only on its own data and warm start.
-- ``check_termination=10`` (:data:`CHECK_TERMINATION`; OSQP's default is 25): warm-started,
-  most of the SCP's QPs meet the tolerances within 10 to 20 iterations, and a solve can
-  only stop where it checks. With 25, the benchmark's replans ran 55 ADMM iterations
-  on average (two QPs); with 10, 31, and OSQP's own median time per replan fell from
-  0.56-0.71 to 0.34 ms. A check computes the residuals (three sparse products), less
-  than an iteration's solve with the factorised KKT matrix.
 """
 
 from __future__ import annotations
@@ -42,9 +36,6 @@ logger = logging.getLogger(__name__)
 
 #: Default cap on ADMM iterations per solve.
 MAX_ITER = 10000
-
-#: ADMM iterations between OSQP's convergence checks (module docstring).
-CHECK_TERMINATION = 10
 
 _SOLVED = {osqp.SolverStatus.OSQP_SOLVED}
 _ACCEPTABLE = {osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE}
@@ -119,7 +110,6 @@ class OsqpQp:
             layout.p_matrix(p_data), q, layout.a_matrix_csc(a_data), l, u,
             eps_abs=eps, eps_rel=eps_rel, eps_prim_inf=1e-6, eps_dual_inf=1e-6, polishing=polish, verbose=False,
             warm_starting=True, max_iter=MAX_ITER, adaptive_rho=True, scaling=0, rho=rho,
-            check_termination=CHECK_TERMINATION,
         )
         self._direct = _extension_solver(self._solver)
         self._infinity = float(self._solver.constant("OSQP_INFTY"))
