@@ -17,6 +17,11 @@ iterations per replan, all QPs of its SCP):
   unit-gradient rows, slacks scaled by ``QpLayout.slack_scale``). With the reset but
   Ruiz scaling on: p99 490, largest 900; with both settings: median 50, p99 150,
   largest 200. Each solve now depends only on its own data and warm start.
+
+OSQP's convergence check stays at its default, every 25 ADMM iterations. Every 10 was
+measured twice (docs/PERFORMANCE.md): the median replan 0.82x, but the p99 0.97x (the
+slowest QPs need 150 to 175 iterations either way) and more time around the solver than in
+it per replan.
 """
 
 from __future__ import annotations
