@@ -24,7 +24,7 @@ from estimator.results import Reason
 
 logger = logging.getLogger(__name__)
 
-#: Largest magnitude whose double does not overflow: ``0.5 * (x + x) == x`` up to it.
+#: Largest magnitude ``x`` for which ``x + x`` does not overflow (then ``0.5 * (x + x) == x``).
 _HALF_MAX = np.finfo(float).max / 2.0
 
 H_POSITION = np.hstack([np.eye(3), np.zeros((3, 3))])
