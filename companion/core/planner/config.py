@@ -165,7 +165,7 @@ class PlannerConfig:
         thousand (planner benchmark). Tighter ``solver_eps`` needs more.
     solver_rho : float
         OSQP's initial ADMM step size, restored before every QP of the SCP (see
-        :mod:`companion.core.planner.osqp_qp`).
+        :mod:`companion.core.planner.osqp_qp`, which gives why 0.4).
     replan_work_budget : int
         Compute budget of one replan in work units, never wall time, so a replan's
         result does not depend on the machine: one unit per ADMM iteration, summed over
@@ -205,7 +205,7 @@ class PlannerConfig:
     solver_eps_rel: float = 1e-4
     solver_polish: bool = False
     solver_max_iter: int = 2000
-    solver_rho: float = 0.1
+    solver_rho: float = 0.4
     replan_work_budget: int = 12000
 
     def __post_init__(self) -> None:

@@ -5,9 +5,9 @@ The QP is ``min 0.5 x'Px + q'x  s.t.  l <= Ax <= u`` with ``P`` upper-triangular
 :class:`companion.core.planner.qp_layout.QpLayout`, so ``update(Px=..., Ax=...)`` only
 refactors numerically.
 
-Two settings differ from OSQP's defaults, both chosen on the planner benchmark's
-receding-horizon replans (8 scenes, 472 warm-started replans, ``hyperplane``; ADMM
-iterations per replan, all QPs of its SCP):
+Three settings differ from OSQP's defaults: the initial ``rho`` (below) and these two,
+chosen on the planner benchmark's receding-horizon replans (8 scenes, 472 warm-started
+replans, ``hyperplane``; ADMM iterations per replan, all QPs of its SCP):
 
 - ``rho`` is restored to its initial value before every solve. OSQP adapts ``rho`` within
   a solve and keeps it for the next; the SCP's next QP (a new linearisation, often a new
@@ -17,6 +17,18 @@ iterations per replan, all QPs of its SCP):
   unit-gradient rows, slacks scaled by ``QpLayout.slack_scale``). With the reset but
   Ruiz scaling on: p99 490, largest 900; with both settings: median 50, p99 150,
   largest 200. Each solve now depends only on its own data and warm start.
+
+``rho`` starts at 0.4 (``PlannerConfig.solver_rho``; it was 0.1 until 3 December 2026).
+Measured with 0.1 and 0.4 on the same flights:
+
+- 12 lockstep campaign episodes of each family (seed 1, ``hyperplane``): ADMM iterations
+  per replan 3 to 12 % fewer (antipodal 155 -> 147 on average, crossing 160 -> 141,
+  random 125 -> 113, corridor 132 -> 128); no collision either way; the goal in 36 of 36
+  open-field episodes either way, and in 2 (0.1) and 1 (0.4) of the 12 corridor ones
+  within their 40 s;
+- the corridor demo with ``c_max``, seeds 0 to 3: 8.6 % fewer in all (seed 0 3.5 % more);
+- the planner benchmark (8 scenes, 3 rounds taking turns): p99 replan 2.20 to 2.63 ms
+  against 2.51 to 3.72 ms, with the same median and replan / OSQP ratio.
 
 OSQP's convergence check stays at its default, every 25 ADMM iterations. Every 10 was
 measured twice (docs/PERFORMANCE.md): the median replan 0.82x, but the p99 0.97x (the
@@ -98,7 +110,7 @@ class OsqpQp:
 
     def __init__(self, layout: QpLayout, p_data: np.ndarray, q: np.ndarray, a_data: np.ndarray,
                  l: np.ndarray, u: np.ndarray, *, eps: float, eps_rel: float, polish: bool,
-                 rho: float = 0.1) -> None:
+                 rho: float = 0.4) -> None:
         self.layout = layout
         self._rho = rho
         self._rho_adapted = False
