@@ -21,11 +21,13 @@ replans, ``hyperplane``; ADMM iterations per replan, all QPs of its SCP):
 ``rho`` starts at 0.4 (``PlannerConfig.solver_rho``; it was 0.1 until 3 December 2026).
 Measured with 0.1 and 0.4 on the same flights:
 
-- 12 lockstep campaign episodes of each family (seed 1, ``hyperplane``): ADMM iterations
-  per replan 3 to 12 % fewer (antipodal 155 -> 147 on average, crossing 160 -> 141,
-  random 125 -> 113, corridor 132 -> 128); no collision either way; the goal in 36 of 36
-  open-field episodes either way, and in 2 (0.1) and 1 (0.4) of the 12 corridor ones
-  within their 40 s;
+- 60 lockstep campaign episodes of each family (seed 1, episodes 0 to 59,
+  ``hyperplane``): ADMM iterations per replan 6.6 to 9.3 % fewer on average (antipodal
+  141 -> 129, crossing 162 -> 149, random 140 -> 127, corridor 142 -> 133), their p99
+  the same or lower (1,250 -> 1,225, 1,405 -> 1,400, 1,050 -> 950, 1,050 -> 950); no
+  collision either way, failed plans 2 -> 0, replans with slack 3 -> 4, the goal in 180
+  of 180 open-field episodes either way and in 12 and 11 of the 60 corridor ones within
+  their 40 s;
 - the corridor demo with ``c_max``, seeds 0 to 3: 8.6 % fewer in all (seed 0 3.5 % more);
 - the planner benchmark (8 scenes, 3 rounds taking turns): p99 replan 2.20 to 2.63 ms
   against 2.51 to 3.72 ms, with the same median and replan / OSQP ratio.
