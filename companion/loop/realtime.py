@@ -29,7 +29,6 @@ import gc
 import logging
 import math
 import multiprocessing
-import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field

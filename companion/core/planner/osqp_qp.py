@@ -107,12 +107,12 @@ class OsqpQp:
     polish : bool
         OSQP solution polishing.
     rho : float
-        Initial ADMM step size, restored before every solve.
+        Initial ADMM step size, restored before every solve (``PlannerConfig.solver_rho``).
     """
 
     def __init__(self, layout: QpLayout, p_data: np.ndarray, q: np.ndarray, a_data: np.ndarray,
                  l: np.ndarray, u: np.ndarray, *, eps: float, eps_rel: float, polish: bool,
-                 rho: float = 0.4) -> None:
+                 rho: float) -> None:
         self.layout = layout
         self._rho = rho
         self._rho_adapted = False
