@@ -88,3 +88,63 @@ def test_that_the_two_signing_modules_stay_twins():
         text = path.read_text()
         return text[text.index('"""', 3) + 3:]  # everything after the module docstring
     assert code(ROOT / "companion/mavlink/signing.py") == code(ROOT / "mavsim/signing.py")
+
+
+# ---------------------------------------------------------------- the autopilot boundary
+
+#: Where the companion may name PX4 in code: its autopilot module and its registration.
+PX4_ALLOWED = ("companion/mavlink/autopilots/px4.py", "companion/mavlink/autopilots/__init__.py")
+#: PX4's own mode names as strings: generic code asks an autopilot for a mode's role instead.
+PX4_MODE_STRINGS = frozenset({"OFFBOARD", "POSCTL", "ALTCTL", "AUTO.LOITER", "AUTO.TAKEOFF", "AUTO.LAND", "AUTO.RTL",
+                              "AUTO.MISSION"})
+
+
+def _px4_names(path: Path) -> list[str]:
+    """Every identifier, import or attribute of ``path`` that names PX4, and every PX4 mode name
+    as a whole string (comments and docstrings are prose, not code, and may say PX4)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    found = []
+    for node in ast.walk(tree):
+        names: list[str] = []
+        if isinstance(node, ast.Name):
+            names = [node.id]
+        elif isinstance(node, ast.Attribute):
+            names = [node.attr]
+        elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names = [node.name]
+        elif isinstance(node, ast.arg):
+            names = [node.arg]
+        elif isinstance(node, ast.alias):
+            names = [node.name, node.asname or ""]
+        elif isinstance(node, ast.ImportFrom):
+            names = [node.module or ""]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in PX4_MODE_STRINGS:
+            found.append(f"{path}:{node.lineno} string {node.value!r}")
+        found += [f"{path}:{node.lineno} {name}" for name in names if "px4" in name.lower()]
+    return found
+
+
+def _px4_violations(root: Path) -> list[str]:
+    bad = []
+    for path in sorted((root / "companion").rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if rel not in PX4_ALLOWED:
+            bad += [f.replace(str(path), rel) for f in _px4_names(path)]
+    return bad
+
+
+def test_that_no_code_outside_the_px4_autopilot_module_names_px4():
+    """Adding an autopilot is one module in companion/mavlink/autopilots/ and its registration."""
+    assert _px4_violations(ROOT) == []
+
+
+def test_that_the_px4_name_checker_sees_names_imports_and_mode_strings(tmp_path):
+    loop = tmp_path / "companion" / "loop"
+    loop.mkdir(parents=True)
+    (loop / "x.py").write_text('"""PX4 in prose is fine."""\nfrom companion.mavlink.autopilots import px4\n'
+                               'def f(hb):  # PX4 in a comment too\n    return hb.mode == "AUTO.LOITER" or px4.OFFBOARD\n')
+    assert sorted(_px4_violations(tmp_path)) == [
+        "companion/loop/x.py:2 px4",
+        "companion/loop/x.py:4 px4",
+        "companion/loop/x.py:4 string 'AUTO.LOITER'",
+    ]

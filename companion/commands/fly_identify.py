@@ -25,6 +25,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.errors import ConfigError, LinkError
 from companion.mavlink import messages
+from companion.mavlink.autopilots import ModeRole
 from companion.mavlink.link import open_link
 from companion.offline.identify import step_sequence
 
@@ -107,14 +108,14 @@ def fly_identification(url: str, tlog: str, *, arm: bool, takeoff_alt_m: float |
             alt = math.nan if f.home_alt_m is None else f.home_alt_m + takeoff_alt_m
             f.link.send(messages.takeoff_command(alt))
             f.pump(2.0)
-            if not f.pump(TAKEOFF_WAIT_S, until=lambda: f.hb.mode == "AUTO.LOITER" and f.z_m is not None
+            if not f.pump(TAKEOFF_WAIT_S, until=lambda: f.hb.role is ModeRole.HOLD and f.z_m is not None
                           and f.z_m < -takeoff_alt_m + 0.3):
                 raise LinkError(f"the vehicle did not reach {takeoff_alt_m} m within {TAKEOFF_WAIT_S:.0f} s")
             f.pump(2.0)
         hold = (0.0, 0.0, 0.0)
         f.pump(1.0, setpoint=hold)
         for _ in range(10):
-            f.link.send(messages.offboard_command(True))
+            f.link.send(messages.set_mode_command(f.hb.kind, ModeRole.OFFBOARD, True))
             if f.pump(1.0, setpoint=hold, until=lambda: f.hb.offboard):
                 break
         if not f.hb.offboard:
@@ -123,11 +124,11 @@ def fly_identification(url: str, tlog: str, *, arm: bool, takeoff_alt_m: float |
         for duration, v in step_sequence():
             f.pump(duration, setpoint=v)
         for _ in range(10):
-            f.link.send(messages.hold_command(True))
-            if f.pump(1.0, setpoint=hold, until=lambda: f.hb.mode == "AUTO.LOITER"):
+            f.link.send(messages.set_mode_command(f.hb.kind, ModeRole.HOLD, True))
+            if f.pump(1.0, setpoint=hold, until=lambda: f.hb.role is ModeRole.HOLD):
                 break
         f.pump(2.0)
-        return {"final_mode": f.hb.mode, "failsafe_texts": [t for t in f.texts if "ailsafe" in t], "tlog": tlog}
+        return {"final_mode": f.hb.mode, "held": f.hb.role is ModeRole.HOLD, "failsafe_texts": [t for t in f.texts if "ailsafe" in t], "tlog": tlog}
     finally:
         f.link.close()
 
@@ -139,4 +140,4 @@ def run(args: argparse.Namespace) -> int:
     report = fly_identification(args.connect, args.tlog, arm=args.arm, takeoff_alt_m=args.takeoff_alt)
     print(f"identification steps flown; final mode {report['final_mode']}; failsafe texts: {report['failsafe_texts'] or 'none'}")
     print(f"tlog: {args.tlog}\nnext: companion identify {args.tlog} --write-scenario vehicle_response.toml")
-    return 0 if report["final_mode"] == "AUTO.LOITER" and not report["failsafe_texts"] else 1
+    return 0 if report["held"] and not report["failsafe_texts"] else 1

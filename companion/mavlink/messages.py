@@ -26,7 +26,8 @@ from typing import Union
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.mavlink import px4
+from companion.mavlink import autopilots
+from companion.mavlink.autopilots import Autopilot, ModeRole
 from companion.errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -71,11 +72,13 @@ UINT32_WRAP = 1 << 32
 
 @dataclass(frozen=True)
 class VehicleHeartbeat:
-    """A HEARTBEAT of any system, with PX4 mode and identity worked out.
+    """A HEARTBEAT of any system, with its autopilot's mode and identity worked out.
 
-    ``mode`` is the PX4 mode name (``'OFFBOARD'``, ``'AUTO.LOITER'``) when
-    ``autopilot`` is PX4, else ``''``. ``is_autopilot`` applies
-    :func:`companion.mavlink.px4.is_autopilot_heartbeat`.
+    ``kind`` is the registered autopilot (:mod:`companion.mavlink.autopilots`) that the
+    ``autopilot`` field announces, None for any other; ``mode`` is that autopilot's name
+    of ``custom_mode`` (``''`` without one) and ``role`` what the mode means to the
+    companion. ``is_autopilot``: a vehicle's autopilot of a registered kind
+    (:func:`companion.mavlink.autopilots.of_heartbeat`).
     """
 
     sysid: int
@@ -88,23 +91,17 @@ class VehicleHeartbeat:
     armed: bool
     mode: str
     is_autopilot: bool
+    role: ModeRole = ModeRole.OTHER
+    kind: Autopilot | None = None
 
     @property
     def key(self) -> Key:
         return (self.sysid, self.compid)
 
     @property
-    def main_mode(self) -> int:
-        return px4.decode_custom_mode(self.custom_mode)[0]
-
-    @property
-    def sub_mode(self) -> int:
-        return px4.decode_custom_mode(self.custom_mode)[1]
-
-    @property
     def offboard(self) -> bool:
-        """Main mode OFFBOARD (6): the only evidence that the companion is in control."""
-        return self.is_autopilot and self.main_mode == px4.MainMode.OFFBOARD
+        """In the autopilot's offboard role: the only evidence that the companion is in control."""
+        return self.is_autopilot and self.role is ModeRole.OFFBOARD
 
 
 @dataclass(frozen=True, eq=False)
@@ -237,8 +234,8 @@ def decode(msg: mavlink2.MAVLink_message) -> Decoded | None:
 def decode_heartbeat(msg: mavlink2.MAVLink_heartbeat_message) -> VehicleHeartbeat:
     """HEARTBEAT to :class:`VehicleHeartbeat`."""
     sysid, compid = source_key(msg)
-    is_ap = px4.is_autopilot_heartbeat(sysid, compid, msg.autopilot, msg.type)
-    mode = px4.mode_name(msg.custom_mode) if msg.autopilot == px4.MAV_AUTOPILOT_PX4 else ""
+    kind = autopilots.by_mav_autopilot(msg.autopilot)
+    is_ap = autopilots.of_heartbeat(sysid, compid, msg.autopilot, msg.type) is not None
     return VehicleHeartbeat(
         sysid=sysid,
         compid=compid,
@@ -247,9 +244,11 @@ def decode_heartbeat(msg: mavlink2.MAVLink_heartbeat_message) -> VehicleHeartbea
         base_mode=int(msg.base_mode),
         custom_mode=int(msg.custom_mode),
         system_status=int(msg.system_status),
-        armed=px4.is_armed(msg.base_mode),
-        mode=mode,
+        armed=autopilots.is_armed(msg.base_mode),
+        mode=kind.mode_name(msg.custom_mode) if kind is not None else "",
         is_autopilot=is_ap,
+        role=kind.mode_role(msg.custom_mode) if kind is not None else ModeRole.OTHER,
+        kind=kind,
     )
 
 
@@ -592,28 +591,14 @@ def request_message_command(message_id: int, **target) -> mavlink2.MAVLink_comma
     return command_long(mavlink2.MAV_CMD_REQUEST_MESSAGE, (float(int(message_id)),), **target)
 
 
-def set_mode_command(custom_mode: int, armed: bool, **target) -> mavlink2.MAVLink_command_long_message:
-    """MAV_CMD_DO_SET_MODE (176) for a packed PX4 ``custom_mode``.
+def set_mode_command(autopilot: Autopilot, role: ModeRole, armed: bool, **target) -> mavlink2.MAVLink_command_long_message:
+    """MAV_CMD_DO_SET_MODE (176) asking ``autopilot`` for the mode of ``role`` (offboard, hold, position).
 
-    param1 = 1 (custom mode enabled) + 128 if the vehicle is armed, param2 = main
-    mode unpacked, param3 = sub mode; see :func:`companion.mavlink.px4.set_mode_params`.
+    The parameters are the autopilot's (:meth:`~companion.mavlink.autopilots.base.Autopilot.set_mode_params`);
+    ``armed`` says whether the vehicle is armed (some autopilots read param1's armed bit).
     """
-    return command_long(mavlink2.MAV_CMD_DO_SET_MODE, px4.set_mode_params(custom_mode, armed), **target)
-
-
-def offboard_command(armed: bool, **target) -> mavlink2.MAVLink_command_long_message:
-    """DO_SET_MODE OFFBOARD: param2 = 6, param3 = 0."""
-    return set_mode_command(px4.OFFBOARD, armed, **target)
-
-
-def hold_command(armed: bool, **target) -> mavlink2.MAVLink_command_long_message:
-    """DO_SET_MODE AUTO.LOITER (Hold): param2 = 4, param3 = 3."""
-    return set_mode_command(px4.AUTO_LOITER, armed, **target)
-
-
-def posctl_command(armed: bool, **target) -> mavlink2.MAVLink_command_long_message:
-    """DO_SET_MODE POSCTL (Position): param2 = 3, param3 = 0."""
-    return set_mode_command(px4.POSCTL, armed, **target)
+    return command_long(mavlink2.MAV_CMD_DO_SET_MODE,
+                        autopilot.set_mode_params(autopilot.custom_mode_of(role), armed), **target)
 
 
 def arm_command(arm: bool, **target) -> mavlink2.MAVLink_command_long_message:

@@ -60,7 +60,8 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.mavlink import messages, px4
+from companion.mavlink import messages
+from companion.mavlink.autopilots import Autopilot, ModeRole
 from companion import validation as check
 from companion.mavlink.messages import CommandAck, VehicleHeartbeat
 
@@ -262,7 +263,7 @@ class OffboardSequencer:
     # ------------------------------------------------------------------ inputs
 
     def on_heartbeat(self, t_s: float, hb: VehicleHeartbeat) -> None:
-        """Feed any decoded HEARTBEAT; only the (first) PX4 autopilot's count."""
+        """Feed any decoded HEARTBEAT; only the (first) autopilot's count (one of a registered kind)."""
         if not hb.is_autopilot:
             return
         if self._target is None:
@@ -271,7 +272,7 @@ class OffboardSequencer:
             logger.debug("ignoring HEARTBEAT of a second autopilot %s (following %s)", hb.key, self._target)
             return
         self._hb, self._hb_t, self._hb_new = hb, t_s, True
-        if hb.main_mode == px4.MainMode.AUTO and hb.sub_mode == px4.AutoSubMode.TAKEOFF:
+        if hb.role is ModeRole.TAKEOFF:
             self._seen_takeoff_mode = True
         self._advance(t_s)
 
@@ -345,10 +346,10 @@ class OffboardSequencer:
         if self._phase not in (Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED):
             return
         self._pending = None
-        self._transition(t_s, Phase.HANDING_BACK, f"{reason}; requesting Hold (AUTO.LOITER)",
+        self._transition(t_s, Phase.HANDING_BACK, f"{reason}; requesting Hold ({self._mode(ModeRole.HOLD)})",
                          mavlink2.MAV_SEVERITY_NOTICE)
         if self._target is not None:
-            self._send(t_s, messages.hold_command(bool(self._hb and self._hb.armed), **self._tgt()))
+            self._send(t_s, messages.set_mode_command(self._kind, ModeRole.HOLD, bool(self._hb and self._hb.armed), **self._tgt()))
         self._advance(t_s)
 
     def _request_home(self, t_s: float) -> None:
@@ -383,9 +384,9 @@ class OffboardSequencer:
                 return
             if self._was_engaged:
                 if hb.offboard and hb.armed:
-                    self._transition(t_s, Phase.ENGAGED, "link back; vehicle still in OFFBOARD, resuming")
+                    self._transition(t_s, Phase.ENGAGED, f"link back; vehicle still in {self._mode(ModeRole.OFFBOARD)}, resuming")
                 else:
-                    self._left_offboard(t_s, f"link back; vehicle left OFFBOARD for {hb.mode}")
+                    self._left_offboard(t_s, f"link back; vehicle left {self._mode(ModeRole.OFFBOARD)} for {hb.mode}")
             else:
                 self._transition(t_s, self._entry_phase(hb), "link back; resuming the sequence")
         elif phase is Phase.ARMING:
@@ -402,12 +403,12 @@ class OffboardSequencer:
                 return
             if self._pending is None and not self._seen_takeoff_mode:
                 self._send(t_s, messages.takeoff_command(self._takeoff_param7(), **self._tgt()))
-            if self._seen_takeoff_mode and hb.mode == "AUTO.LOITER":
+            if self._seen_takeoff_mode and hb.role is ModeRole.HOLD:
                 self._pending = None
                 if self._takeoff_done_s is None:
                     self._takeoff_done_s = t_s
                 if t_s - self._takeoff_done_s >= cfg.takeoff_settle_s - 1e-9:
-                    self._transition(t_s, Phase.PRESTREAM, "takeoff complete (AUTO.LOITER)"
+                    self._transition(t_s, Phase.PRESTREAM, f"takeoff complete ({self._mode(ModeRole.HOLD)})"
                                      + (f", settled {cfg.takeoff_settle_s:.1f} s" if cfg.takeoff_settle_s else ""))
             elif self._pending is not None and t_s - self._pending.first_s > cfg.takeoff_timeout_s:
                 self._pending = None
@@ -418,18 +419,18 @@ class OffboardSequencer:
                 self._transition(t_s, Phase.PRESTREAM, "vehicle armed; streaming setpoints")
         elif phase is Phase.PRESTREAM:
             if not hb.armed:
-                self._transition(t_s, self._entry_phase(hb), "vehicle disarmed before OFFBOARD")
+                self._transition(t_s, self._entry_phase(hb), f"vehicle disarmed before {self._mode(ModeRole.OFFBOARD)}")
             elif hb.offboard:
-                self._engage(t_s, "vehicle switched to OFFBOARD")
+                self._engage(t_s, f"vehicle switched to {self._mode(ModeRole.OFFBOARD)}")
             elif self._since is not None and t_s - self._since >= cfg.prestream_s:
-                self._transition(t_s, Phase.REQUEST_OFFBOARD, f"streamed {cfg.prestream_s:.1f} s; requesting OFFBOARD")
-                self._send(t_s, messages.offboard_command(True, **self._tgt()))
+                self._transition(t_s, Phase.REQUEST_OFFBOARD, f"streamed {cfg.prestream_s:.1f} s; requesting {self._mode(ModeRole.OFFBOARD)}")
+                self._send(t_s, messages.set_mode_command(self._kind, ModeRole.OFFBOARD, True, **self._tgt()))
         elif phase is Phase.REQUEST_OFFBOARD:
             if not hb.armed:
                 self._pending = None
-                self._transition(t_s, self._entry_phase(hb), "vehicle disarmed before OFFBOARD")
+                self._transition(t_s, self._entry_phase(hb), f"vehicle disarmed before {self._mode(ModeRole.OFFBOARD)}")
             elif hb.offboard:
-                self._engage(t_s, "OFFBOARD confirmed by HEARTBEAT")
+                self._engage(t_s, f"{self._mode(ModeRole.OFFBOARD)} confirmed by HEARTBEAT")
         elif phase is Phase.HANDING_BACK:
             if not hb.offboard or not hb.armed:
                 self._pending = None
@@ -438,7 +439,7 @@ class OffboardSequencer:
                                  mavlink2.MAV_SEVERITY_NOTICE)
         elif phase is Phase.ENGAGED:
             if not hb.offboard:
-                self._left_offboard(t_s, f"vehicle left OFFBOARD for {hb.mode}")
+                self._left_offboard(t_s, f"vehicle left {self._mode(ModeRole.OFFBOARD)} for {hb.mode}")
             elif not hb.armed:
                 self._left_offboard(t_s, "vehicle disarmed")
 
@@ -484,9 +485,9 @@ class OffboardSequencer:
         elif self._phase is Phase.TAKEOFF:
             msg = messages.takeoff_command(self._takeoff_param7(), confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.REQUEST_OFFBOARD:
-            msg = messages.set_mode_command(px4.OFFBOARD, armed, confirmation=pending.attempts, **self._tgt())
+            msg = messages.set_mode_command(self._kind, ModeRole.OFFBOARD, armed, confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.HANDING_BACK:
-            msg = messages.set_mode_command(px4.AUTO_LOITER, armed, confirmation=pending.attempts, **self._tgt())
+            msg = messages.set_mode_command(self._kind, ModeRole.HOLD, armed, confirmation=pending.attempts, **self._tgt())
         else:
             self._pending = None
             return
@@ -498,6 +499,16 @@ class OffboardSequencer:
     def _send(self, t_s: float, msg: mavlink2.MAVLink_command_long_message) -> None:
         self._pending = _Pending(command=int(msg.command), first_s=t_s, last_s=t_s)
         self._actions.append(SendCommand(msg))
+
+    @property
+    def _kind(self) -> Autopilot:
+        """The followed autopilot's kind (known from its first HEARTBEAT, before any command)."""
+        assert self._hb is not None and self._hb.kind is not None
+        return self._hb.kind
+
+    def _mode(self, role: ModeRole) -> str:
+        """The followed autopilot's name of the mode the companion requests for ``role``."""
+        return self._kind.mode_name(self._kind.custom_mode_of(role))
 
     def _tgt(self) -> dict[str, int]:
         assert self._target is not None  # only called once the autopilot is known

@@ -31,7 +31,7 @@ from scipy.optimize import least_squares
 
 from companion.core.planner.vehicle_model import AxisResponse, discretise
 from companion.errors import CompanionError
-from companion.mavlink import messages, px4
+from companion.mavlink import messages
 from companion.mavlink.tlog import read_tlog
 
 logger = logging.getLogger(__name__)
@@ -110,7 +110,7 @@ def load_response_log(path: str | Path, grid_s: float = GRID_S) -> ResponseLog:
             if hb.is_autopilot and (target is None or hb.key == target):
                 target = hb.key
                 mode_t.append(t)
-                mode_off.append(hb.main_mode == px4.MainMode.OFFBOARD and hb.armed)
+                mode_off.append(hb.offboard and hb.armed)
         elif kind == "SET_POSITION_TARGET_LOCAL_NED" and msg.coordinate_frame == messages.MAV_FRAME_LOCAL_NED:
             mask = int(msg.type_mask)
             if mask & (messages.TM_VX | messages.TM_VY | messages.TM_VZ):

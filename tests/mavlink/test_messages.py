@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink import messages as M
-from companion.mavlink import px4
+from companion.mavlink.autopilots import ModeRole, px4
 from companion.errors import InputError
 
 NAN = float("nan")
@@ -50,7 +50,7 @@ def test_that_px4_armed_offboard_heartbeat_decodes_to_offboard_autopilot():
     hb = M.decode(wire(mavlink2.MAVLink_heartbeat_message(2, 12, 145, px4.OFFBOARD, 4, 3)))
     assert isinstance(hb, M.VehicleHeartbeat)
     assert hb.is_autopilot and hb.armed and hb.offboard
-    assert (hb.mode, hb.main_mode, hb.sub_mode, hb.key, hb.type, hb.system_status) == ("OFFBOARD", 6, 0, (1, 1), 2, 4)
+    assert (hb.mode, hb.role, hb.kind, hb.key, hb.type, hb.system_status) == ("OFFBOARD", ModeRole.OFFBOARD, px4.PX4, (1, 1), 2, 4)
 
 
 def test_that_obstacle_heartbeat_is_not_an_autopilot_and_has_no_mode():
@@ -237,16 +237,16 @@ def test_that_named_value_float_names_are_limited_to_10_characters():
         M.named_value_float(0, "contour_touch", 0.5)
 
 
-def test_that_offboard_command_sends_do_set_mode_with_main_mode_six_unpacked():
-    m = wire(M.offboard_command(armed=True), 1, 191)
+def test_that_the_offboard_request_to_px4_sends_do_set_mode_with_main_mode_six_unpacked():
+    m = wire(M.set_mode_command(px4.PX4, ModeRole.OFFBOARD, armed=True), 1, 191)
     assert (m.command, m.param1, m.param2, m.param3) == (176, 129.0, 6.0, 0.0)
-    assert wire(M.offboard_command(armed=False)).param1 == 1.0
+    assert wire(M.set_mode_command(px4.PX4, ModeRole.OFFBOARD, armed=False)).param1 == 1.0
 
 
-def test_that_hold_and_posctl_commands_select_loiter_and_position():
-    hold = wire(M.hold_command(armed=True))
+def test_that_hold_and_position_requests_to_px4_select_loiter_and_posctl():
+    hold = wire(M.set_mode_command(px4.PX4, ModeRole.HOLD, armed=True))
     assert (hold.param2, hold.param3) == (4.0, 3.0)
-    pos = wire(M.posctl_command(armed=True))
+    pos = wire(M.set_mode_command(px4.PX4, ModeRole.POSITION, armed=True))
     assert (pos.param2, pos.param3) == (3.0, 0.0)
 
 

@@ -4,7 +4,8 @@ import math
 
 import pytest
 
-from companion.mavlink import px4
+from companion.mavlink import autopilots
+from companion.mavlink.autopilots import ModeRole, px4
 from companion.errors import ConfigError
 from companion.mavlink.messages import CommandAck, VehicleHeartbeat
 from companion.mavlink.offboard import Notify, OffboardConfig, OffboardSequencer, Phase, SendCommand
@@ -17,7 +18,9 @@ def hb(custom_mode=px4.POSCTL, armed=True, key=(1, 1), autopilot=12):
     return VehicleHeartbeat(sysid=key[0], compid=key[1], autopilot=autopilot, type=2, base_mode=base,
                             custom_mode=custom_mode, system_status=4 if armed else 3, armed=armed,
                             mode=px4.mode_name(custom_mode) if autopilot == 12 else "",
-                            is_autopilot=px4.is_autopilot_heartbeat(*key, autopilot, 2))
+                            is_autopilot=autopilots.of_heartbeat(*key, autopilot, 2) is not None,
+                            role=px4.PX4.mode_role(custom_mode) if autopilot == 12 else ModeRole.OTHER,
+                            kind=autopilots.by_mav_autopilot(autopilot))
 
 
 def ack(command, result, key=(1, 1)):

@@ -1,4 +1,4 @@
-"""PX4 custom_mode encoding, mode names and autopilot identity."""
+"""PX4 custom_mode encoding, mode names, roles and autopilot identity (companion.mavlink.autopilots.px4)."""
 
 import pytest
 from hypothesis import given
@@ -6,7 +6,8 @@ from hypothesis import strategies as st
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.mavlink import px4
+from companion.mavlink import autopilots
+from companion.mavlink.autopilots import ModeRole, px4
 from companion.errors import InputError
 
 
@@ -70,7 +71,7 @@ def test_that_unknown_mode_names_are_refused_with_the_known_list():
 
 @pytest.mark.parametrize(("base_mode", "armed"), [(145, True), (157, True), (209, True), (1, False), (81, False)])
 def test_that_armed_comes_from_base_mode_bit_128(base_mode, armed):
-    assert px4.is_armed(base_mode) is armed
+    assert autopilots.is_armed(base_mode) is armed
 
 
 def test_that_only_a_px4_autopilot_component_counts_as_autopilot():
@@ -90,3 +91,28 @@ def test_that_set_mode_params_send_main_mode_unpacked_and_armed_bit_when_armed()
     assert px4.set_mode_params(px4.AUTO_LOITER, armed=True) == (129.0, 4.0, 3.0)
     with pytest.raises(InputError):
         px4.set_mode_params(0, armed=False)
+
+
+def test_that_the_registry_knows_px4_by_its_heartbeat_and_nothing_else():
+    assert autopilots.of_heartbeat(1, 1, 12, 2) is px4.PX4
+    assert autopilots.of_heartbeat(1, 1, 3, 2) is None      # ArduPilot is not registered (yet)
+    assert autopilots.of_heartbeat(101, 0, 8, 2) is None    # a mavsim obstacle system
+    assert autopilots.of_heartbeat(1, 191, 12, 18) is None  # a companion that says PX4
+
+
+@pytest.mark.parametrize(("mode", "role"), [
+    (px4.OFFBOARD, ModeRole.OFFBOARD), (px4.AUTO_LOITER, ModeRole.HOLD), (px4.AUTO_TAKEOFF, ModeRole.TAKEOFF),
+    (px4.POSCTL, ModeRole.POSITION), (px4.AUTO_RTL, ModeRole.OTHER), (px4.AUTO_LAND, ModeRole.OTHER),
+    (px4.encode_custom_mode(px4.MainMode.AUTO, px4.AutoSubMode.MISSION), ModeRole.OTHER),
+    (px4.encode_custom_mode(px4.MainMode.MANUAL), ModeRole.OTHER), (0, ModeRole.OTHER),
+])
+def test_that_each_px4_mode_plays_its_role(mode, role):
+    assert px4.PX4.mode_role(mode) is role
+
+
+def test_that_the_requested_modes_are_offboard_hold_and_position_and_round_trip_to_their_roles():
+    for role in (ModeRole.OFFBOARD, ModeRole.HOLD, ModeRole.POSITION):
+        assert px4.PX4.mode_role(px4.PX4.custom_mode_of(role)) is role
+    assert px4.PX4.mode_name(px4.PX4.custom_mode_of(ModeRole.HOLD)) == "AUTO.LOITER"
+    with pytest.raises(InputError, match="never requests a PX4 mode for 'takeoff'"):
+        px4.PX4.custom_mode_of(ModeRole.TAKEOFF)

@@ -8,7 +8,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.cli import main
 from companion.core.planner.vehicle_model import AxisResponse
-from companion.mavlink import messages, px4
+from companion.mavlink import messages
+from companion.mavlink.autopilots import px4
 from companion.mavlink.tlog import TlogWriter
 from companion.offline.identify import IdentifyError, identify, load_response_log, step_sequence
 

@@ -13,8 +13,9 @@ Mode names follow PX4's own console and QGroundControl's short names
 ``mavutil.mode_string_v10`` prints the same names for non-AUTO modes and drops
 the ``AUTO.`` prefix for AUTO sub modes (``'LOITER'``).
 
-Pure: no I/O. Only PX4 is recognised as an autopilot (autopilot id 12); this
-companion relies on PX4's offboard contract, which ArduPilot does not share.
+:data:`PX4` is PX4's :class:`~companion.mavlink.autopilots.base.Autopilot`: OFFBOARD is the
+companion's role, AUTO.LOITER (Hold) where it hands back, AUTO.TAKEOFF PX4's take-off,
+POSCTL the pilot's position mode. Pure: no I/O.
 """
 
 from __future__ import annotations
@@ -23,18 +24,16 @@ import enum
 import logging
 
 from companion.errors import InputError
+from companion.mavlink.autopilots.base import (
+    MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+    MAV_MODE_FLAG_SAFETY_ARMED,
+    ModeRole,
+    is_vehicle_autopilot,
+)
 
 logger = logging.getLogger(__name__)
 
 MAV_AUTOPILOT_PX4 = 12
-MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
-MAV_MODE_FLAG_SAFETY_ARMED = 128
-
-#: MAV_TYPE values that never denote a flying vehicle's autopilot: GCS 6,
-#: ONBOARD_CONTROLLER 18, GIMBAL 26, ADSB 27, CAMERA 30, CHARGING_STATION 31,
-#: FLARM 32, SERVO 33, ODID 34, BATTERY 36, PARACHUTE 37, LOG 38, OSD 39, IMU 40,
-#: GPS 41, WINCH 42.
-NON_VEHICLE_TYPES = frozenset({6, 18, 26, 27, 30, 31, 32, 33, 34, 36, 37, 38, 39, 40, 41, 42})
 
 
 class MainMode(enum.IntEnum):
@@ -130,11 +129,6 @@ def is_offboard(custom_mode: int) -> bool:
     return decode_custom_mode(custom_mode)[0] == MainMode.OFFBOARD
 
 
-def is_armed(base_mode: int) -> bool:
-    """Armed flag of a HEARTBEAT: ``base_mode & 128`` (MAV_MODE_FLAG_SAFETY_ARMED)."""
-    return bool(int(base_mode) & MAV_MODE_FLAG_SAFETY_ARMED)
-
-
 def is_autopilot_heartbeat(sysid: int, compid: int, autopilot: int, mav_type: int) -> bool:
     """Whether a HEARTBEAT comes from a PX4 autopilot.
 
@@ -144,12 +138,7 @@ def is_autopilot_heartbeat(sysid: int, compid: int, autopilot: int, mav_type: in
     Any system id 1..255 is accepted (PX4's MAV_SYS_ID is configurable).
     Obstacle systems in ``mavsim`` send autopilot INVALID (8) and are refused.
     """
-    return (
-        1 <= int(sysid) <= 255
-        and int(compid) == 1
-        and int(autopilot) == MAV_AUTOPILOT_PX4
-        and int(mav_type) not in NON_VEHICLE_TYPES
-    )
+    return int(autopilot) == MAV_AUTOPILOT_PX4 and is_vehicle_autopilot(sysid, compid, mav_type)
 
 
 def set_mode_params(custom_mode: int, armed: bool) -> tuple[float, float, float]:
@@ -175,3 +164,36 @@ AUTO_TAKEOFF = encode_custom_mode(MainMode.AUTO, AutoSubMode.TAKEOFF)
 AUTO_LOITER = encode_custom_mode(MainMode.AUTO, AutoSubMode.LOITER)
 AUTO_LAND = encode_custom_mode(MainMode.AUTO, AutoSubMode.LAND)
 AUTO_RTL = encode_custom_mode(MainMode.AUTO, AutoSubMode.RTL)
+
+
+_ROLES = {OFFBOARD: ModeRole.OFFBOARD, AUTO_LOITER: ModeRole.HOLD, AUTO_TAKEOFF: ModeRole.TAKEOFF, POSCTL: ModeRole.POSITION}
+_REQUESTS = {ModeRole.OFFBOARD: OFFBOARD, ModeRole.HOLD: AUTO_LOITER, ModeRole.POSITION: POSCTL}
+
+
+class Px4Autopilot:
+    """PX4 as the companion sees it (:class:`~companion.mavlink.autopilots.base.Autopilot`)."""
+
+    name = "PX4"
+    mav_autopilot = MAV_AUTOPILOT_PX4
+    #: PX4 streams LOCAL_POSITION_NED, ODOMETRY, HOME_POSITION and HEARTBEAT on its onboard link by itself.
+    streams: tuple[tuple[int, float], ...] = ()
+
+    def mode_name(self, custom_mode: int) -> str:
+        return mode_name(custom_mode)
+
+    def mode_role(self, custom_mode: int) -> ModeRole:
+        """By main mode for OFFBOARD and POSCTL (PX4 leaves the sub mode 0 there), by main and sub mode for AUTO."""
+        main, sub = decode_custom_mode(custom_mode)
+        return _ROLES.get(encode_custom_mode(main, sub if main == MainMode.AUTO else 0), ModeRole.OTHER)
+
+    def custom_mode_of(self, role: ModeRole) -> int:
+        try:
+            return _REQUESTS[role]
+        except KeyError:
+            raise InputError(f"the companion never requests a PX4 mode for {role.value!r}") from None
+
+    def set_mode_params(self, custom_mode: int, armed: bool) -> tuple[float, float, float]:
+        return set_mode_params(custom_mode, armed)
+
+
+PX4 = Px4Autopilot()

@@ -59,10 +59,11 @@ SENSING_RANGE_M = 10.0
 VELOCITY_TIME_CONSTANT_S = 0.3
 #: mavsim's vehicle profiles (``[sim] vehicle``) a campaign can fly.
 VEHICLES = ("lag", "px4")
-#: The shipped scenario whose ``[planner] vehicle_response`` the planner uses against the
-#: ``px4`` profile: identified from a mavsim log by ``companion identify`` (never copied
-#: from mavsim's settings), so the test world does not agree with the planner by construction.
-PX4_PROFILE_SCENARIO = "antipodal_px4sim.toml"
+#: For each mavsim vehicle profile but ``lag``, the shipped scenario whose ``[planner]
+#: vehicle_response`` the planner uses against it: identified from a mavsim log by ``companion
+#: identify`` (never copied from mavsim's settings), so the test world does not agree with the
+#: planner by construction.
+PROFILE_SCENARIOS = {"px4": "antipodal_px4sim.toml"}
 DEFAULT_DURATION_S = 40.0
 #: The honest noise model's correlation time, seconds (``--noise-correlation``): PX4's EKF2
 #: position estimate follows GNSS at low frequency (the IMU only smooths it between fixes),
@@ -77,25 +78,27 @@ ENGAGE_S, CRUISE_MPS = 3.2, 1.75
 
 
 @functools.cache
-def _px4_profile_scenario() -> dict:
-    """:data:`PX4_PROFILE_SCENARIO`'s tables, read once (callers copy what they hand out)."""
+def _profile_scenario(vehicle: str) -> dict:
+    """The tables of ``vehicle``'s entry in :data:`PROFILE_SCENARIOS`, read once (callers copy what they hand out)."""
     import tomllib
     from importlib import resources
 
-    text = resources.files("companion.scenarios").joinpath(PX4_PROFILE_SCENARIO).read_text(encoding="utf-8")
+    text = resources.files("companion.scenarios").joinpath(PROFILE_SCENARIOS[vehicle]).read_text(encoding="utf-8")
     return tomllib.loads(text)
 
 
-def px4_profile_response() -> dict[str, dict[str, float]]:
-    """The planner's ``vehicle_response`` table for mavsim's ``px4`` profile (from :data:`PX4_PROFILE_SCENARIO`)."""
-    table = _px4_profile_scenario()["planner"]["vehicle_response"]
+def profile_response(vehicle: str) -> dict[str, dict[str, float]]:
+    """The planner's ``vehicle_response`` table for mavsim's profile ``vehicle`` (from :data:`PROFILE_SCENARIOS`)."""
+    table = _profile_scenario(vehicle)["planner"]["vehicle_response"]
     return {name: dict(axis) for name, axis in table.items()}
 
 
-def px4_profile_response_state() -> str:
-    """Where the plans start the response's internal state against the ``px4`` profile
-    (``[companion] response_state`` of :data:`PX4_PROFILE_SCENARIO`)."""
-    return str(_px4_profile_scenario().get("companion", {}).get("response_state", "steady"))
+def profile_response_state(vehicle: str) -> str | None:
+    """Where the plans start the response's internal state against mavsim's profile ``vehicle``
+    (``[companion] response_state`` of its :data:`PROFILE_SCENARIOS` entry); None for ``lag``."""
+    if vehicle not in PROFILE_SCENARIOS:
+        return None
+    return str(_profile_scenario(vehicle).get("companion", {}).get("response_state", "steady"))
 
 
 def episode_rng(seed: int, index: int) -> np.random.Generator:
@@ -284,12 +287,12 @@ def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90
         data["sim"]["position_noise_correlation_s"] = float(noise_correlation_s)
         for ob in obstacles:
             ob["measurement_correlation_s"] = float(noise_correlation_s)
-    if vehicle == "px4":
+    if vehicle in PROFILE_SCENARIOS:
         del data["planner"]["velocity_time_constant_s"], data["sim"]["velocity_time_constant_s"]
         del data["sim"]["accel_max_mps2"]
-        data["sim"]["vehicle"] = "px4"
-        data["planner"]["vehicle_response"] = px4_profile_response()
-        data["companion"]["response_state"] = px4_profile_response_state()
+        data["sim"]["vehicle"] = vehicle
+        data["planner"]["vehicle_response"] = profile_response(vehicle)
+        data["companion"]["response_state"] = profile_response_state(vehicle)
     if walls:
         data["map"] = {"walls": walls}
     return data

@@ -21,7 +21,7 @@ from typing import Callable, Iterator, Sequence
 
 from companion.errors import ConfigError, InputError, LinkError
 from companion.offline.campaign.generate import (DEFAULT_DURATION_S, FAMILIES, METHODS, episode_sim_seed, generate_scenario,
-                                                px4_profile_response_state)
+                                                profile_response_state)
 from companion.offline.campaign.progress import Progress
 from companion.offline.campaign.results import CampaignResult, EpisodeResult
 from companion.offline.campaign.score import score_run
@@ -191,7 +191,7 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
     episodes, methods = tuple(episodes), tuple(methods)
     workers = workers or os.cpu_count() or 1
     keys = [(i, m) for i in episodes for m in methods]
-    response_state = px4_profile_response_state() if vehicle == "px4" else None
+    response_state = profile_response_state(vehicle)
     store = (ResultsFile(results_path, campaign_header(family, seed, c_min, duration_s, noise_correlation_s, vehicle,
                                                        response_state), resume=resume)
              if results_path is not None else None)
