@@ -5,7 +5,7 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 BSTAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench campaign reliability campaign-test realtime-test crowd-test px4-test venv clean
+.PHONY: demo test bench campaign reliability campaign-test realtime-test crowd-test px4-test quarantine-test flake-check venv clean
 
 # PX4 SITL build with start-sih (see docs/PX4.md); `make px4-test` flies the companion against it.
 PX4_SITL_DIR ?= ../shared/px4-sitl
@@ -65,15 +65,26 @@ campaign-test: $(STAMP)
 	$(VENV)/bin/pytest -q -m slow
 
 # Closed loops in wall-clock time over loopback UDP (mavsim and the companion as two processes).
+# Tests marked quarantine are not 20 of 20 in `make flake-check` yet: CI leaves them out.
 realtime-test: $(STAMP)
-	$(VENV)/bin/pytest -q -m realtime
+	$(VENV)/bin/pytest -q -m 'realtime and not quarantine'
 
-# Only the flights with 200 extra obstacle systems (antipodal and corridor; part of realtime-test).
+# Only the flights with 200 extra obstacle systems (antipodal and corridor, the corridor in quarantine).
 crowd-test: $(STAMP)
 	$(VENV)/bin/pytest -q -m crowd
 
 px4-test: $(STAMP)
-	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -s -m px4 tests/px4
+	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -s -m 'px4 and not quarantine' tests/px4
+
+# The real-time and SITL tests kept out of CI until they are steady (pytest -m quarantine --collect-only lists them).
+quarantine-test: $(STAMP)
+	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -m quarantine
+
+# CI's real-time and PX4 SITL stages N times, one after another, and a table of each test's passes.
+# FLAKE_ARGS='--stage quarantine' checks the quarantined tests instead. Reports in out/flake-check/.
+N ?= 20
+flake-check: $(STAMP)
+	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VPY) -m tests.support.flake_check --runs $(N) $(FLAKE_ARGS)
 
 clean:
 	rm -rf $(VENV) out bench-results.json

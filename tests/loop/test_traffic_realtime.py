@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.cli import main
 from companion.loop.config import load_scenario
 from companion.offline.replay import replay
+from tests.support.flight_summary import record_flight
 from tests.support.traffic_scenarios import antipodal_variant
 from tests.support.ports import free_udp_port
 
@@ -49,9 +50,10 @@ def _check_flight(summary: dict, n_sources: int) -> None:
 
 
 def test_that_odometry_on_an_obstacle_link_from_offset_drifting_clocks_is_flown_safely_in_real_time_and_replays_exactly(
-        tmp_path, capsys):
+        tmp_path, capsys, record_property):
     scenario = antipodal_variant("odometry_clocks", tmp_path)
     summary = _realtime_demo(scenario, capsys, out=tmp_path / "out")
+    record_flight(record_property, summary, kept_at=tmp_path / "out")
     _check_flight(summary, 3)
     # The tlog marks each tick and the link of each obstacle message (companion.loop.tlog_marks):
     # the replay feeds every message on its own link at its own tick and reproduces every command.
@@ -65,8 +67,9 @@ def test_that_odometry_on_an_obstacle_link_from_offset_drifting_clocks_is_flown_
 
 @pytest.mark.realtime
 @pytest.mark.parametrize("name", ["adsb", "remote_id"])
-def test_that_adsb_through_the_autopilot_and_remote_id_are_flown_safely_in_real_time(name, tmp_path, capsys):
-    summary = _realtime_demo(antipodal_variant(name, tmp_path), capsys)
+def test_that_adsb_through_the_autopilot_and_remote_id_are_flown_safely_in_real_time(name, tmp_path, capsys, record_property):
+    summary = _realtime_demo(antipodal_variant(name, tmp_path), capsys, out=tmp_path / "out")
+    record_flight(record_property, summary, kept_at=tmp_path / "out")
     _check_flight(summary, 3)
     assert summary["obstacle_intake"]["origin"] is not None  # GPS_GLOBAL_ORIGIN requested and answered
 

@@ -20,6 +20,7 @@ import json
 
 import pytest
 
+from tests.support.flight_summary import record_flight
 from tests.px4.flight import fly_once, judge_encounter, judge_replay, judge_safety, judge_takeoff
 from tests.px4.sitl import REPO, sitl_dir
 
@@ -28,10 +29,11 @@ pytestmark = pytest.mark.px4
 SCENARIO = REPO / "configs" / "antipodal_px4.toml"
 
 
-def test_that_the_companion_flies_px4_sitl_through_the_antipodal_encounter_safely_hands_back_and_replays_exactly(tmp_path):
+def test_that_the_companion_flies_px4_sitl_through_the_antipodal_encounter_safely_hands_back_and_replays_exactly(tmp_path, record_property):
     if sitl_dir() is None:
         pytest.fail("no PX4 SITL build: set PX4_SITL_DIR or put one at ../shared/px4-sitl (start-sih inside)")
     result = fly_once(tmp_path / "flight", SCENARIO)
+    record_flight(record_property, result, kept_at=tmp_path / "flight")
     print(json.dumps(result, indent=1, default=str))
     assert result.get("world_errors") == [], result
     missed = judge_takeoff(result)
