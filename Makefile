@@ -5,10 +5,13 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 BSTAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench campaign reliability campaign-test realtime-test crowd-test px4-test quarantine-test flake-check venv clean
+.PHONY: demo test bench campaign reliability campaign-test realtime-test crowd-test fault-campaign px4-test ardupilot-test ardupilot-adsb-test quarantine-test flake-check venv clean
 
 # PX4 SITL build with start-sih (see docs/PX4.md); `make px4-test` flies the companion against it.
 PX4_SITL_DIR ?= ../shared/px4-sitl
+# ArduCopter SITL (start-arducopter and arducopter-sitl.tar.gz, or the unpacked arducopter-sitl/; README
+# "Flying ArduPilot"); `make ardupilot-test` flies the companion against it (the tarball is unpacked to a temp dir).
+ARDUPILOT_SITL_DIR ?= ../shared/ardupilot-sitl
 
 $(VPY):
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python 3.11 or newer is needed, found " + sys.version' 
@@ -73,6 +76,10 @@ realtime-test: $(STAMP)
 crowd-test: $(STAMP)
 	$(VENV)/bin/pytest -q -m crowd
 
+# Every lockstep fault of docs/FAULTS.md on 20 seeds, judged in truth (not in `make test`).
+fault-campaign: $(STAMP)
+	$(VENV)/bin/python -m tests.support.fault_campaign --runs 20
+
 px4-test: $(STAMP)
 	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -s -m 'px4 and not quarantine' tests/px4
 
@@ -85,6 +92,13 @@ quarantine-test: $(STAMP)
 N ?= 20
 flake-check: $(STAMP)
 	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VPY) -m tests.support.flake_check --runs $(N) $(FLAKE_ARGS)
+
+ardupilot-test: $(STAMP)
+	ARDUPILOT_SITL_DIR=$(ARDUPILOT_SITL_DIR) $(VENV)/bin/pytest -q -s -m 'ardupilot and not ardupilot_adsb' tests/ardupilot
+
+# The ArduCopter encounter with ADS-B traffic: its c_min promise does not hold in every run yet (README).
+ardupilot-adsb-test: $(STAMP)
+	ARDUPILOT_SITL_DIR=$(ARDUPILOT_SITL_DIR) $(VENV)/bin/pytest -q -s -m ardupilot_adsb tests/ardupilot
 
 clean:
 	rm -rf $(VENV) out bench-results.json

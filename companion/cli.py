@@ -1,8 +1,13 @@
-"""``companion`` command line: subcommands are discovered in ``companion.commands``.
+"""``companion`` command line: the subcommands are the modules named in :data:`COMMANDS`.
 
-Each module ``companion/commands/<name>.py`` defines ``register(subparsers)`` which adds
-one (or more) subparsers and sets ``func`` on them; ``func(args) -> int`` is the exit
-code. Only this entry point configures logging, and the BLAS thread pools (one thread).
+Each module ``companion/commands/<name>.py`` listed there defines ``register(subparsers)``
+which adds one (or more) subparsers and sets ``func`` on them; ``func(args) -> int`` is the
+exit code. Only this entry point configures logging, and the BLAS thread pools (one thread).
+
+Start-up is kept short: every ``companion`` run builds the whole parser, so registering a
+command imports nothing heavy (no numpy, scipy, filterpy, osqp, numba, pymavlink,
+matplotlib); a command imports what it needs in its ``func``, when it runs
+(``tests/commands/test_startup.py``; ``python -m tests.benchmarks startup``).
 """
 
 from __future__ import annotations
@@ -11,12 +16,11 @@ import argparse
 import importlib
 import logging
 import os
-import pkgutil
 from importlib import metadata
 import sys
 from typing import NoReturn
 
-from companion import commands as _commands
+from companion.commands._help import PlainHelpFormatter
 from companion.errors import CompanionError
 
 logger = logging.getLogger(__name__)
@@ -27,6 +31,12 @@ logger = logging.getLogger(__name__)
 #: wait, spinning: against PX4 SITL the process of ``fly`` used 55 to 61 % of a core with
 #: OpenBLAS's default threads and 11 to 13 % with one (docs/REALTIME.md).
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+#: The modules of ``companion.commands`` that register subcommands, in the order of ``--help``.
+#: Listed, not discovered: discovering would import every module of the package, helpers
+#: too (``fly_identify`` imports pymavlink). tests/commands/test_startup.py checks that every
+#: module defining ``register`` is listed.
+COMMANDS = ("campaign", "demo", "fly", "identify", "overlap", "plan", "reliability", "replay")
 
 
 def _one_blas_thread() -> None:
@@ -51,7 +61,13 @@ def _version() -> str:
 
 
 class OneLineErrorParser(argparse.ArgumentParser):
-    """argparse with its errors on one line (``companion SUB: error: argument --x: ...``), exit 2."""
+    """argparse with its errors on one line (``companion SUB: error: argument --x: ...``), exit 2,
+    and its help in plain text (:class:`~companion.commands._help.PlainHelpFormatter` unless a
+    parser names another formatter)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", PlainHelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
@@ -66,11 +82,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging (-v info, -vv debug)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for info in sorted(pkgutil.iter_modules(_commands.__path__), key=lambda m: m.name):
-        module = importlib.import_module(f"{_commands.__name__}.{info.name}")
-        register = getattr(module, "register", None)
-        if register is not None:
-            register(sub)
+    for name in COMMANDS:
+        importlib.import_module(f"companion.commands.{name}").register(sub)
     return parser
 
 

@@ -131,6 +131,12 @@ class TrackerConfig(_FromMapping):
         the track, s. This also ends a lock-out by the gate.
     drop_after_s : float
         :meth:`~estimator.ObstacleTracker.prune` drops tracks silent for longer, s.
+    report_correlation_s : float
+        Correlation time of the reports' position errors, s (>= 0). 0, the default,
+        takes every report's error as independent of the others; a source whose errors
+        drift slowly (a GNSS position: about 60 s) makes a filter that fuses its reports as
+        independent overconfident, and a value here carries the error in the filter
+        instead (:class:`~estimator.cv_filter.ConstantVelocityFilter`).
     """
 
     accel_noise_psd_m2ps3: float = 0.5
@@ -140,10 +146,16 @@ class TrackerConfig(_FromMapping):
     gate_probability: float = 0.9999
     reinit_gap_s: float = 1.5
     drop_after_s: float = 3.0
+    report_correlation_s: float = 0.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            _require_positive(self, f.name)
+            if f.name != "report_correlation_s":
+                _require_positive(self, f.name)
+        if not (math.isfinite(self.report_correlation_s) and self.report_correlation_s >= 0.0):
+            raise EstimatorConfigError(
+                f"TrackerConfig.report_correlation_s must be finite seconds >= 0, got {self.report_correlation_s!r}"
+            )
         if not self.gate_probability < 1.0:
             raise EstimatorConfigError(
                 f"TrackerConfig.gate_probability must be in (0, 1), got {self.gate_probability!r}"

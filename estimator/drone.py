@@ -40,7 +40,13 @@ class DroneFilter:
 
     def __init__(self, config: DroneFilterConfig) -> None:
         self.config = config
-        self._filter = ConstantVelocityFilter(
+        self._filter = self._new_filter()
+        self._counts: Counter[str] = Counter()
+        self.resets = 0  #: times :meth:`reset` forgot the estimate
+
+    def _new_filter(self) -> ConstantVelocityFilter:
+        config = self.config
+        return ConstantVelocityFilter(
             accel_noise_psd_m2ps3=config.accel_noise_psd_m2ps3,
             initial_velocity_std_mps=config.initial_velocity_std_mps,
             reinit_gap_s=config.reinit_gap_s,
@@ -48,7 +54,12 @@ class DroneFilter:
             label="drone",
             adopt_reports=config.reports == "estimate",
         )
-        self._counts: Counter[str] = Counter()
+
+    def reset(self) -> None:
+        """Forget the estimate (the autopilot's estimator reset: its reports before and after are
+        in frames a jump apart and must not be blended); the next report initialises it."""
+        self._filter = self._new_filter()
+        self.resets += 1
 
     @property
     def state(self) -> GaussianState | None:

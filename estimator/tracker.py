@@ -127,6 +127,7 @@ class ObstacleTracker:
                 reinit_gap_s=cfg.reinit_gap_s,
                 gate_thresholds=self.gate_thresholds,
                 label=f"track {key!r}",
+                report_correlation_s=cfg.report_correlation_s,
             )
             self._tracks[key] = track
             self._counts["tracks_created"] += 1
@@ -211,8 +212,9 @@ class ObstacleTracker:
         tracks = [self._track(key) for key in keys]
         if not tracks:
             return np.zeros(0), np.zeros((0, 6)), np.zeros((0, 6, 6))
-        return (np.array([tr.t_s for tr in tracks], dtype=float), np.array([tr.kf.x for tr in tracks], dtype=float),
-                np.array([tr.kf.P for tr in tracks], dtype=float))
+        states = [tr.published() for tr in tracks]
+        return (np.array([tr.t_s for tr in tracks], dtype=float), np.array([x for x, _ in states], dtype=float),
+                np.array([P for _, P in states], dtype=float))
 
     def predict_many(self, keys: list, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`predict` of several tracks at the same absolute times, in one vectorised pass.
@@ -230,7 +232,8 @@ class ObstacleTracker:
         if not tracks:
             return np.zeros((0, t.size, 3)), np.zeros((0, t.size, 3, 3))
         lags = np.maximum(t[None, :] - np.array([tr.t_s for tr in tracks])[:, None], 0.0)
-        return propagate_position(np.array([tr.kf.x for tr in tracks]), np.array([tr.kf.P for tr in tracks]), lags,
+        states = [tr.published() for tr in tracks]
+        return propagate_position(np.array([x for x, _ in states]), np.array([P for _, P in states]), lags,
                                   self.config.accel_noise_psd_m2ps3)
 
     def _track(self, key: Hashable) -> ConstantVelocityFilter:

@@ -1,13 +1,14 @@
 """The autopilot's MAVLink face: incoming messages to commander calls and replies,
-and per-link telemetry stream scheduling.
+and per-link telemetry stream scheduling. The same for every autopilot: what a request
+does is its personality's commander's (:class:`mavsim.personalities.base.Commander`).
 
 Handled: COMMAND_LONG / COMMAND_INT (DO_SET_MODE 176, COMPONENT_ARM_DISARM 400,
 NAV_TAKEOFF 22, NAV_LAND 21, NAV_RETURN_TO_LAUNCH 20, NAV_LOITER_UNLIM 17,
 REQUEST_MESSAGE 512, REQUEST_AUTOPILOT_CAPABILITIES 520, SET_MESSAGE_INTERVAL 511,
 GET_MESSAGE_INTERVAL 510; every other command is answered ACK 3 UNSUPPORTED),
 SET_MODE, SET_POSITION_TARGET_LOCAL_NED, PARAM_REQUEST_LIST / PARAM_REQUEST_READ /
-PARAM_SET, MISSION_REQUEST_LIST (MISSION_COUNT 0), MISSION_COUNT / MISSION_CLEAR_ALL
-(MISSION_ACK), PING, TIMESYNC (answered; answers to its own requests are counted in
+PARAM_SET, the mission protocol (upload and download of mission, fence and rally items,
+MISSION_SET_CURRENT: :mod:`mavsim.missions`), PING, TIMESYNC (answered; answers to its own requests are counted in
 ``stats["timesync_answers"]``). Messages addressed to another system or component are
 ignored; anything else is counted and ignored. Replies go to the link the request
 came on; STATUSTEXT to every link.
@@ -22,9 +23,10 @@ from collections import Counter
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
+from mavsim.missions import MissionStore
 from mavsim.params import ParamStore
-from mavsim.px4 import SEV_WARNING, Commander, OffboardSetpoint
-from mavsim.telemetry import DEFAULT_RATES_HZ, MSG_AUTOPILOT_VERSION, STREAM_IDS, TelemetryBuilder
+from mavsim.personalities.base import SEV_WARNING, Commander, OffboardSetpoint
+from mavsim.telemetry import MSG_AUTOPILOT_VERSION, STREAM_IDS, TelemetryBuilder
 from mavsim.vehicle import VehicleState
 
 logger = logging.getLogger(__name__)
@@ -52,25 +54,29 @@ class Autopilot:
     Parameters
     ----------
     commander, params, telemetry
-        The PX4 behaviour, parameter store and message builder.
+        The personality's commander, the parameter store and the message builder.
     links : sequence of str
         Link names (e.g. ``("api", "gcs")``); each has its own stream intervals.
     rates_hz : dict
         Stream rate overrides by name.
     home_alt_m : float
         Home altitude AMSL (m), to read NAV_TAKEOFF's param7.
+    default_rates_hz : dict
+        The streams sent by default, name -> rate (Hz, 0 off): the personality's.
     """
 
     def __init__(self, commander: Commander, params: ParamStore, telemetry: TelemetryBuilder,
-                 links: tuple[str, ...], rates_hz: dict[str, float], home_alt_m: float) -> None:
+                 links: tuple[str, ...], rates_hz: dict[str, float], home_alt_m: float,
+                 default_rates_hz: dict[str, float]) -> None:
         self.cmdr, self.params, self.tm = commander, params, telemetry
         self.home_alt_m = home_alt_m
-        rates = {**DEFAULT_RATES_HZ, **rates_hz}
+        rates = {**default_rates_hz, **rates_hz}
         self._default_us = {STREAM_IDS[n]: (round(1e6 / r) if r > 0 else None) for n, r in rates.items()}
         self.interval_us = {link: dict(self._default_us) for link in links}
         self.next_due = {link: {i: 0 for i in self._default_us} for link in links}
         self._earliest_due_us = 0    # no stream is due before this (us); lowered by SET_MESSAGE_INTERVAL
         self.stats: Counter[str] = Counter()
+        self.missions = MissionStore()   # mission, fence and rally items uploaded by a client
         self._last_reject: dict[str, int] = {}
 
     # ------------------------------------------------------------------ streams
@@ -91,7 +97,7 @@ class Autopilot:
                         due[msg_id] = now_us + iv
                 if iv is not None:
                     earliest = min(earliest, due[msg_id])
-            if links:
+            if links and self.cmdr.sends(msg_id):
                 pos, vel = estimate()
                 msg = self.tm.build(msg_id, now_us, self.cmdr, veh, pos, vel)
                 out.extend((link, msg) for link in links)
@@ -142,25 +148,26 @@ class Autopilot:
         now_s = now_us * 1e-6
         c = self.cmdr
         extra: list = []
-        if command == 176:  # MAV_CMD_DO_SET_MODE
-            base, main, sub = _finite_int(p[0]), _finite_int(p[1]), _finite_int(p[2])
-            if base is None or main is None or not base & 1:
+        if command == 176:  # MAV_CMD_DO_SET_MODE: base mode, custom mode, custom sub mode
+            base, custom, sub = _finite_int(p[0]), _finite_int(p[1]), _finite_int(p[2])
+            if base is None or custom is None or not base & 1:
                 result = mavlink2.MAV_RESULT_DENIED
             else:
-                result = c.request_mode(main, sub or 0, now_s, veh)
+                result = c.request_mode(custom, sub or 0, now_s, veh)
         elif command == 400:  # MAV_CMD_COMPONENT_ARM_DISARM
             if p[0] not in (0.0, 1.0):
                 result = mavlink2.MAV_RESULT_DENIED
             else:
                 result = c.request_arm(p[0] == 1.0, p[1] == 21196.0, now_s, veh)
-        elif command == 22:  # MAV_CMD_NAV_TAKEOFF, param7 altitude AMSL
-            result = c.request_takeoff(p[6] - self.home_alt_m, now_s, veh)
-        elif command == 21:
-            result = c.request_mode(4, 6, now_s, veh)
-        elif command == 20:
-            result = c.request_mode(4, 5, now_s, veh)
-        elif command == 17:
-            result = c.request_mode(4, 3, now_s, veh)
+        elif command == 22:  # MAV_CMD_NAV_TAKEOFF, param7 altitude AMSL or above home (the personality's)
+            rel = p[6] - self.home_alt_m if self.tm.personality.takeoff_alt_amsl else p[6]
+            result = c.request_takeoff(rel, now_s, veh)
+        elif command == 21:  # MAV_CMD_NAV_LAND
+            result = c.request_land(now_s, veh)
+        elif command == 20:  # MAV_CMD_NAV_RETURN_TO_LAUNCH
+            result = c.request_return(now_s, veh)
+        elif command == 17:  # MAV_CMD_NAV_LOITER_UNLIM
+            result = c.request_hold(now_s, veh)
         elif command in (512, 520):  # REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES
             msg_id = MSG_AUTOPILOT_VERSION if command == 520 else _finite_int(p[0])
             reply = None
@@ -205,8 +212,7 @@ class Autopilot:
     def _on_set_mode(self, msg, now_us, veh, estimate):
         if not msg.base_mode & 1:
             return [self._ack(msg, 176, mavlink2.MAV_RESULT_DENIED)]
-        main, sub = (msg.custom_mode >> 16) & 0xFF, (msg.custom_mode >> 24) & 0xFF
-        return [self._ack(msg, 176, self.cmdr.request_mode(main, sub, now_us * 1e-6, veh))]
+        return [self._ack(msg, 176, self.cmdr.request_set_mode(msg.custom_mode, now_us * 1e-6, veh))]
 
     def _on_set_position_target_local_ned(self, msg, now_us, veh, estimate):
         frame, mask = msg.coordinate_frame, msg.type_mask
@@ -274,18 +280,12 @@ class Autopilot:
             self._reject("param", f"PARAM_SET: {problem}", now_us)
         return [self._param_value(name)]
 
-    def _on_mission_request_list(self, msg, now_us, veh, estimate):
-        return [mavlink2.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), 0,
-                                                       getattr(msg, "mission_type", 0))]
+    def _on_mission(self, msg, now_us, veh, estimate):
+        """The mission protocol: :class:`mavsim.missions.MissionStore` stores and serves the items."""
+        return self.missions.handle(msg)
 
-    def _on_mission_count(self, msg, now_us, veh, estimate):
-        result = 0 if msg.count == 0 else 3  # MAV_MISSION_ACCEPTED / MAV_MISSION_UNSUPPORTED
-        return [mavlink2.MAVLink_mission_ack_message(msg.get_srcSystem(), msg.get_srcComponent(), result,
-                                                     getattr(msg, "mission_type", 0))]
-
-    def _on_mission_clear_all(self, msg, now_us, veh, estimate):
-        return [mavlink2.MAVLink_mission_ack_message(msg.get_srcSystem(), msg.get_srcComponent(), 0,
-                                                     getattr(msg, "mission_type", 0))]
+    _on_mission_request_list = _on_mission_count = _on_mission_clear_all = _on_mission
+    _on_mission_request_int = _on_mission_request = _on_mission_item_int = _on_mission_set_current = _on_mission
 
     def _on_ping(self, msg, now_us, veh, estimate):
         if msg.target_system != 0:

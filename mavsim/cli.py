@@ -5,6 +5,8 @@ Examples::
     mavsim --scenario configs/antipodal.toml            # real time, ports as PX4 SITL
     mavsim --scenario configs/antipodal.toml --speed 5 --duration 30 --json --tlog out.tlog
     mavsim --lockstep --duration 60 --json              # no sockets: as fast as possible, no client
+    mavsim --scenario configs/antipodal.toml --on-ground --obstacles-start offboard   # the README's fly recipe
+    mavsim traffic --scenario configs/antipodal_px4.toml --duration 120 --json     # obstacles into a real PX4 (mavsim.traffic_cli)
 
 Exit status: 0 on success, 2 on a bad scenario file or bad arguments (the message
 names the file, section and key; a bad argument; a port that cannot be bound).
@@ -26,11 +28,12 @@ from pathlib import Path
 from typing import NoReturn
 
 from mavsim.signing import SigningKeyError, load_signing_key
-from mavsim.core import OBSTACLE_LINK, Simulator
+from mavsim.core import OBSTACLE_LINK, OBSTACLES_START, Simulator
 from mavsim.errors import ScenarioError, SimulationError
 from mavsim.lockstep import LockstepSimulator
-from mavsim.scenario import default_scenario, load_scenario
-from mavsim.udp import LinkAddress, UdpServer
+from mavsim.personalities import DEFAULT_PERSONALITY, PERSONALITIES
+from mavsim.scenario import default_scenario, load_scenario, on_the_ground
+from mavsim.udp import LinkAddress, SerialAddress, UdpServer
 
 logger = logging.getLogger(__name__)
 
@@ -44,6 +47,16 @@ def _port(text: str) -> int:
         raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
     if not 0 <= v <= 65535:
         raise argparse.ArgumentTypeError(f"port must be in 0..65535, got {v}")
+    return v
+
+
+def _baud(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 300 <= v <= 4_000_000:
+        raise argparse.ArgumentTypeError(f"baud rate must be in 300..4000000, got {v}")
     return v
 
 
@@ -101,9 +114,13 @@ class _OneLineErrorParser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _OneLineErrorParser(prog="mavsim", description="PX4-like MAVLink kinematic simulator with scripted obstacles")
+    p = _OneLineErrorParser(prog="mavsim", description="PX4-like MAVLink kinematic simulator with scripted obstacles "
+                            "(`mavsim traffic --help`: play a scenario's obstacles into a real autopilot)")
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
-    p.add_argument("--scenario", help="scenario file (configs/*.toml); default: no obstacles, on the ground")
+    p.add_argument("--autopilot", choices=tuple(PERSONALITIES), default=DEFAULT_PERSONALITY,
+                   help=f"the autopilot imitated (default {DEFAULT_PERSONALITY})")
+    p.add_argument("--scenario", help="scenario file (configs/*.toml) or a shipped scenario's name (antipodal, ...); "
+                                      "default: no obstacles, on the ground")
     p.add_argument("--speed", type=_positive, default=1.0, help="simulated seconds per wall second (default 1)")
     p.add_argument("--duration", type=_positive, help="simulated seconds to run (default: the scenario's duration_s)")
     p.add_argument("--forever", action="store_true", help="run until interrupted (ignores duration_s)")
@@ -112,10 +129,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the run summary as JSON at the end")
     p.add_argument("--api-port", type=_port, default=14540, help="offboard client port to send to (default 14540)")
     p.add_argument("--gcs-port", type=_port, default=14550, help="ground station port to send to (default 14550)")
+    p.add_argument("--serial", metavar="DEVICE",
+                   help="serve the API link on this serial device instead of UDP (/dev/ttyUSB0, a pty), as PX4 on TELEM2")
+    p.add_argument("--baud", type=_baud, default=57600,
+                   help="serial baud rate (default 57600); mavsim sends at most half the line's byte rate, as PX4")
     p.add_argument("--api-local-port", type=_port, default=14580, help="local API socket port (default 14580)")
     p.add_argument("--gcs-local-port", type=_port, default=18570, help="local GCS socket port (default 18570)")
     p.add_argument("--obstacle-port", type=_port, default=14601,
                    help="port obstacles with transport = \"link\" are sent to (the companion's --obstacles port; default 14601)")
+    p.add_argument("--on-ground", action="store_true",
+                   help="start on the ground below the scenario's start point, disarmed, in Position mode, as PX4 SITL "
+                        "boots (for `companion fly --arm --takeoff-alt`)")
+    p.add_argument("--obstacles-start", choices=OBSTACLES_START, default="boot",
+                   help="when the obstacles' scripted motion starts: at boot (default) or when the vehicle is first "
+                        "armed in OFFBOARD")
     p.add_argument("--obstacle-local-port", type=_port, default=14591, help="local obstacle socket port (default 14591)")
     p.add_argument("--no-gcs", action="store_true", help="serve the API link only")
     p.add_argument("--bind", default="127.0.0.1", help="address to bind (default 127.0.0.1, loopback)")
@@ -154,11 +181,18 @@ def _stop_on_signals(server: UdpServer):
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``mavsim`` console script; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["traffic"]:
+        from mavsim.traffic_cli import main as traffic_main
+
+        return traffic_main(argv[1:])
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=getattr(logging, args.log_level),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
         scenario = load_scenario(args.scenario) if args.scenario else default_scenario()
+        if args.on_ground:
+            scenario = on_the_ground(scenario)
         signing_key = load_signing_key(args.signing_key_file, args.signing_key_env)
     except (ScenarioError, SigningKeyError) as exc:
         print(f"mavsim: error: {exc}", file=sys.stderr)
@@ -171,15 +205,29 @@ def main(argv: list[str] | None = None) -> int:
         if duration is None:
             print("mavsim: error: --lockstep needs a duration", file=sys.stderr)
             return 2
-        with LockstepSimulator(scenario, seed=args.seed, tlog=args.tlog) as sim:
+        if args.obstacles_start != "boot":
+            print("mavsim: error: --obstacles-start offboard needs a client; --lockstep has none", file=sys.stderr)
+            return 2
+        try:
+            sim = LockstepSimulator(scenario, seed=args.seed, tlog=args.tlog, personality=args.autopilot)
+        except SimulationError as exc:  # the scenario's start mode or parameters are not the autopilot's
+            print(f"mavsim: error: {exc}", file=sys.stderr)
+            return 2
+        with sim:
             sim.advance(duration)
             summary = sim.summary()
     else:
-        links = [LinkAddress("api", args.api_local_port, args.api_port, args.bind, args.target_host)]
+        links = [SerialAddress("api", args.serial, args.baud) if args.serial else
+                 LinkAddress("api", args.api_local_port, args.api_port, args.bind, args.target_host)]
         if not args.no_gcs:
             links.append(LinkAddress("gcs", args.gcs_local_port, args.gcs_port, args.bind, args.target_host))
-        sim = Simulator(scenario, seed=args.seed, links=tuple(l.name for l in links),
-                        signing=None if signing_key is None else (signing_key, time.time()))
+        try:
+            sim = Simulator(scenario, seed=args.seed, links=tuple(l.name for l in links),
+                            signing=None if signing_key is None else (signing_key, time.time()),
+                            obstacles_start=args.obstacles_start, personality=args.autopilot)
+        except SimulationError as exc:  # the scenario's start mode or parameters are not the autopilot's
+            print(f"mavsim: error: {exc}", file=sys.stderr)
+            return 2
         if OBSTACLE_LINK in sim.links:  # some obstacle sends on its own link, like a perception process
             links.append(LinkAddress(OBSTACLE_LINK, args.obstacle_local_port, args.obstacle_port, args.bind, args.target_host))
         try:
@@ -188,11 +236,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f"mavsim: error: {exc}", file=sys.stderr)
             return 2
         ports = server.local_ports
-        print(f"mavsim: scenario {scenario.name!r}, API {args.bind}:{ports['api']} -> "
-              f"{args.target_host}:{args.api_port}"
+        api = (f"API serial {args.serial} at {args.baud} baud" if args.serial else
+               f"API {args.bind}:{ports['api']} -> {args.target_host}:{args.api_port}")
+        print(f"mavsim: scenario {scenario.name!r}, {api}"
               + ("" if args.no_gcs else f", GCS {args.bind}:{ports['gcs']} -> {args.target_host}:{args.gcs_port}")
               + (f", obstacles {args.bind}:{ports[OBSTACLE_LINK]} -> {args.target_host}:{args.obstacle_port}"
                  if OBSTACLE_LINK in ports else "")
+              + (", on the ground" if args.on_ground else "")
+              + (", obstacles start at OFFBOARD" if args.obstacles_start == "offboard" else "")
               + f", speed {args.speed:g}x", file=sys.stderr, flush=True)
         with server, _stop_on_signals(server) as interrupted:
             server.run(duration)

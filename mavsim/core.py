@@ -11,7 +11,9 @@ time; their replies are stamped with it. Each step:
 4. STATUSTEXTs, due telemetry of the vehicle and of every obstacle system are emitted.
 
 Packets are encoded per (link, system, component) so each link has its own sequence
-numbers, as each PX4 MAVLink instance does. Obstacles reach the client the way their
+numbers, as each PX4 MAVLink instance does. What the autopilot is (HEARTBEAT identity,
+modes, commander, parameters, default streams, vehicle responses) is its personality's
+(:mod:`mavsim.personalities`, PX4 by default). Obstacles reach the client the way their
 ``transport`` says: on the separate ``"obstacles"`` link (added to the links when an
 obstacle uses it; the autopilot streams nothing there and ignores what arrives on it),
 re-streamed by the autopilot as ADSB_VEHICLE on every vehicle link, or (the old way) as
@@ -37,7 +39,8 @@ from mavsim.errors import SimulationError
 from mavsim.noise import GaussMarkovError, VelocityBias
 from mavsim.obstacles import AUTOPILOT_ALL_LINKS, OWN_API_LINK, ObstacleSystem, noise_factor
 from mavsim.params import ParamStore
-from mavsim.px4 import SEV_WARNING, Commander
+from mavsim.personalities import DEFAULT_PERSONALITY, get_personality, velocity_response
+from mavsim.personalities.base import SEV_WARNING
 from mavsim.scenario import Scenario, load_scenario
 from mavsim.telemetry import TelemetryBuilder
 from mavsim.truth import Truth, TruthRecorder
@@ -49,6 +52,8 @@ __all__ = ["Simulator", "Packet"]
 
 #: Name of the link obstacles with ``transport = "link"`` send on.
 OBSTACLE_LINK = "obstacles"
+#: When the obstacles' scripted motion may start (see :class:`Simulator`).
+OBSTACLES_START = ("boot", "offboard")
 #: (time since boot in us, link name, raw packet bytes)
 Packet = tuple[int, str, bytes]
 #: tap(direction "in"/"out", link, time_us, packet bytes)
@@ -56,7 +61,7 @@ Tap = Callable[[str, str, int, bytes], None]
 
 
 class Simulator:
-    """PX4-like vehicle plus scripted obstacles behind a byte interface.
+    """An autopilot's vehicle plus scripted obstacles behind a byte interface.
 
     Parameters
     ----------
@@ -69,14 +74,26 @@ class Simulator:
     signing : (key, Unix time s) or None
         MAVLink 2 signing from boot (see :meth:`enable_signing`): the 32-byte key and the
         wall time that seeds the outgoing signing timestamps.
+    obstacles_start : ``"boot"`` or ``"offboard"``
+        When the obstacles' scripted motion starts: at boot (time 0, the default), or when the
+        vehicle is first armed in OFFBOARD (engagement), so an encounter meets the vehicle
+        however long it took to take off. Before that the obstacles report from their start
+        points, at rest. :attr:`obstacles_started_s` is the simulated time it started.
+    personality : str
+        The autopilot imitated, a name in :data:`mavsim.personalities.PERSONALITIES`. The
+        scenario's ``start_mode`` and ``params`` must be its own (SimulationError otherwise).
     """
 
     def __init__(self, scenario: Scenario | str | Path, seed: int = 0, links: tuple[str, ...] = ("api",),
-                 signing: tuple[bytes, float] | None = None) -> None:
+                 signing: tuple[bytes, float] | None = None, obstacles_start: str = "boot",
+                 personality: str = DEFAULT_PERSONALITY) -> None:
+        if obstacles_start not in OBSTACLES_START:
+            raise SimulationError(f"obstacles_start must be one of {', '.join(OBSTACLES_START)}, got {obstacles_start!r}")
         if not isinstance(scenario, Scenario):
             scenario = load_scenario(scenario)
         if not links:
             raise SimulationError("at least one link is needed")
+        self.personality = get_personality(personality)
         self.scenario = scenario
         self.seed = int(seed)
         self.vehicle_links = tuple(links)
@@ -84,6 +101,9 @@ class Simulator:
         self.links = self.vehicle_links + ((OBSTACLE_LINK,) if needs_obstacle_link and OBSTACLE_LINK not in links else ())
         cfg = scenario.sim
         self.now_us = 0
+        self.obstacles_start = obstacles_start
+        #: us since boot the obstacles' motion started (0 at boot; None until engagement)
+        self.motion_epoch_us: int | None = 0 if obstacles_start == "boot" else None
         self.step_us = max(1, round(cfg.physics_step_s * 1e6))
         seeds = np.random.SeedSequence(self.seed).spawn(1 + len(scenario.obstacles))
         self._rng = np.random.Generator(np.random.PCG64(seeds[0]))
@@ -91,14 +111,27 @@ class Simulator:
         self._velocity_bias = VelocityBias(cfg.velocity_bias_mps, cfg.velocity_bias_period_s) \
             if np.any(cfg.velocity_bias_mps) else None
         self._Lv = noise_factor(cfg.velocity_noise_cov_m2ps2)
-        self.vparams = VehicleParams(cfg.velocity_time_constant_s, cfg.accel_max_mps2, profile=cfg.vehicle)
+        self._resets = [(round(t * 1e6), np.array(step)) for t, step in cfg.estimator_resets]
+        self.vparams = VehicleParams(cfg.velocity_time_constant_s, cfg.accel_max_mps2,
+                                     response=velocity_response(cfg.vehicle))
         self.vehicle = initial_state(scenario.start_ned_m, cfg.start_yaw_rad)
-        self.params = ParamStore(cfg.params)
-        self.commander = Commander(self.params, cfg.start_mode, cfg.start_armed, self.vehicle,
-                                   cfg.arming_delay_s, cfg.offboard_reject_ack)
+        ap = self.personality
+        start_mode = cfg.start_mode if cfg.start_mode is not None else ap.default_start_mode(cfg.start_airborne)
+        if start_mode not in ap.mode_names:
+            raise SimulationError(f"start_mode {start_mode!r} is not a mode of autopilot {ap.name!r} "
+                                  f"({', '.join(ap.mode_names)})")
+        unknown = sorted(set(cfg.params) - set(ap.params)) + sorted(set(cfg.stream_rates_hz) - set(ap.stream_rates_hz))
+        if unknown:
+            raise SimulationError(f"not parameters or streams of autopilot {ap.name!r}: {', '.join(unknown)}")
+        self.params = ParamStore(ap.params, cfg.params, ints_bytewise=ap.param_ints_bytewise)
+        arming_delay_s = cfg.arming_delay_s if cfg.arming_delay_s is not None \
+            else ap.default_arming_delay_s(not self.vehicle.on_ground)
+        self.commander = ap.commander(self.params, start_mode, cfg.start_armed, self.vehicle,
+                                      arming_delay_s, cfg.offboard_reject_ack)
         tm = TelemetryBuilder(cfg.position_noise_cov_m2, cfg.velocity_noise_cov_m2ps2,
-                              cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m, cfg.geoid_separation_m)
-        self.autopilot = Autopilot(self.commander, self.params, tm, self.vehicle_links, cfg.stream_rates_hz, cfg.home_alt_m)
+                              cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m, cfg.geoid_separation_m, ap)
+        self.autopilot = Autopilot(self.commander, self.params, tm, self.vehicle_links, cfg.stream_rates_hz,
+                                   cfg.home_alt_m, ap.stream_rates_hz)
         origin = (cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m)
         self.obstacles = [
             ObstacleSystem(ob, scenario.obstacle_sysid_base + i, scenario.obstacle_compid,
@@ -157,12 +190,34 @@ class Simulator:
             velocity = v.velocity_ned_mps + self._Lv @ w[3:]
             if self._velocity_bias is not None:    # the velocity estimate the velocity loop flies on
                 velocity = velocity + self._velocity_bias.bias(self.now_us * 1e-6)
-            self._est = (v.position_ned_m + self._position_error.sample(self.now_us, w[:3]), velocity)
+            position = v.position_ned_m + self._position_error.sample(self.now_us, w[:3])
+            done = [step for t_us, step in self._resets if t_us <= self.now_us]
+            if done:   # the estimator's resets so far: the estimate stepped, the counter counts them
+                position = position + np.sum(done, axis=0)
+            self.autopilot.tm.reset_counter = len(done) % 256
+            self._est = (position, velocity)
             self._est_t = self.now_us
         return self._est
 
+    @property
+    def obstacles_started_s(self) -> float | None:
+        """Simulated time (s) the obstacles' motion started, or None before engagement."""
+        return None if self.motion_epoch_us is None else self.motion_epoch_us / 1e6
+
+    def _motion_s(self, now_us: int) -> float:
+        """Time on the obstacles' scripted tracks at ``now_us`` (s; 0 before their start)."""
+        if self.motion_epoch_us is None:
+            return 0.0
+        return (now_us - self.motion_epoch_us) * 1e-6
+
+    def _check_engaged(self) -> None:
+        """Start the obstacles' motion at the first armed OFFBOARD (``obstacles_start = "offboard"``)."""
+        if self.motion_epoch_us is None and self.commander.engaged:
+            self.motion_epoch_us = self.now_us
+            logger.info("t=%.2f engaged: obstacles start moving", self.now_us * 1e-6)
+
     def _obstacle_positions(self, now_us: int) -> np.ndarray:
-        t_s = now_us * 1e-6
+        t_s = self._motion_s(now_us)
         return np.array([o.track.position(t_s) for o in self.obstacles]).reshape(-1, 3)
 
     def _encode(self, link: str, sysid: int, compid: int, msg) -> bytes:
@@ -193,12 +248,21 @@ class Simulator:
             texts.clear()
 
     def _emit_due(self) -> None:
+        self._check_engaged()
         self._flush_texts()
+        if self.commander.announce:
+            pos, vel = self._estimate()
+            for msg_id in self.commander.announce:
+                msg = self.autopilot.tm.build(msg_id, self.now_us, self.commander, self.vehicle, pos, vel)
+                for link in self.vehicle_links:
+                    self._send(link, SYSID, COMPID, msg)
+            self.commander.announce.clear()
         for link, msg in self.autopilot.streams_due(self.now_us, self.vehicle, self._estimate):
             self._send(link, SYSID, COMPID, msg)
         api = self.links[0]
+        motion_s = None if self.motion_epoch_us == 0 else self._motion_s(self.now_us)
         for ob in self.obstacles:
-            for route, msg in ob.due(self.now_us):
+            for route, msg in ob.due(self.now_us, motion_s):
                 if route == AUTOPILOT_ALL_LINKS:
                     for link in self.vehicle_links:
                         self._send(link, SYSID, COMPID, msg)
@@ -251,6 +315,7 @@ class Simulator:
                 continue
             for out_link, reply in replies:
                 self._send(out_link, SYSID, COMPID, reply)
+        self._check_engaged()
         self._flush_texts()
 
     def _signature_rejected(self) -> None:
@@ -290,7 +355,7 @@ class Simulator:
         t = self.now_us * 1e-6
         pos, vel = {}, {}
         for o in self.obstacles:
-            p, v = o.track.state(t)
+            p, v = o.track.state(self._motion_s(self.now_us))
             pos[o.name], vel[o.name] = p, v
         v = self.vehicle
         return Truth(t, v.position_ned_m.copy(), v.velocity_ned_mps.copy(), v.yaw_rad, v.on_ground,
@@ -307,6 +372,8 @@ class Simulator:
             "final_position_ned_m": [float(x) for x in v.position_ned_m],
             "final_mode": self.commander.mode,
             "armed": self.commander.armed,
+            "obstacles_start": self.obstacles_start,
+            "obstacles_started_s": self.obstacles_started_s,
             "mode_changes": [{"t_s": round(t, 6), "mode": m} for t, m in self.commander.mode_changes],
             "link": {**{k: int(n) for k, n in sorted(self.stats.items())},
                      **{k: int(n) for k, n in sorted(self.autopilot.stats.items())}},

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from mavsim.core import OBSTACLE_LINK, Simulator
+from mavsim.personalities import DEFAULT_PERSONALITY
 from mavsim.errors import SimulationError
 from mavsim.scenario import Scenario, load_scenario, scenario_from_dict
 from mavsim.tlog import LOCKSTEP_EPOCH_US, TlogWriter
@@ -46,25 +47,28 @@ class LockstepSimulator:
         Record every packet sent and received on the API link, and sent on the obstacle
         link (stamped with
         :data:`mavsim.tlog.LOCKSTEP_EPOCH_US` plus simulated time).
+    personality : str
+        The autopilot imitated (:data:`mavsim.personalities.PERSONALITIES`).
     """
 
     def __init__(self, scenario: Scenario | dict[str, Any] | str | Path, seed: int = 0,
-                 tlog: str | Path | None = None) -> None:
+                 tlog: str | Path | None = None, personality: str = DEFAULT_PERSONALITY) -> None:
         if isinstance(scenario, dict):
             scenario = scenario_from_dict(scenario)
         elif not isinstance(scenario, Scenario):
             scenario = load_scenario(scenario)
+        self._sim = Simulator(scenario, seed=seed, links=("api",), personality=personality)
         self._tlog = TlogWriter(tlog) if tlog is not None else None
-        self._sim = Simulator(scenario, seed=seed, links=("api",))
         self._obstacle_packets: list[tuple[float, bytes]] = []
         if self._tlog is not None:
             # The boot packets were queued before the tap existed; record them on output.
             self._sim.taps.append(self._record_in)
 
     @classmethod
-    def from_file(cls, path: str | Path, seed: int = 0, tlog: str | Path | None = None) -> "LockstepSimulator":
+    def from_file(cls, path: str | Path, seed: int = 0, tlog: str | Path | None = None,
+                  personality: str = DEFAULT_PERSONALITY) -> "LockstepSimulator":
         """Load a scenario file (raises :class:`mavsim.ScenarioError` naming file/section/key)."""
-        return cls(load_scenario(path), seed=seed, tlog=tlog)
+        return cls(load_scenario(path), seed=seed, tlog=tlog, personality=personality)
 
     def _record_in(self, direction: str, link: str, t_us: int, data: bytes) -> None:
         if direction == "in" and self._tlog is not None:

@@ -176,8 +176,12 @@ class ObstacleSystem:
         self._garbage_sent = True
         return True
 
-    def due(self, now_us: int) -> list[tuple[str, object]]:
-        """(route, message) pairs due at ``now_us`` (call once per step, in time order)."""
+    def due(self, now_us: int, motion_s: float | None = None) -> list[tuple[str, object]]:
+        """(route, message) pairs due at ``now_us`` (call once per step, in time order).
+
+        ``motion_s``: the time (s) on the obstacle's scripted track, when its motion does not
+        start at boot (mavsim's ``--obstacles-start offboard``, the traffic player); default
+        ``now_us`` in seconds. The report schedule and the stamps keep ``now_us``."""
         if now_us < self.next_heartbeat_us and now_us < self.next_report_us:    # most physics steps
             return []
         out: list[tuple[str, object]] = []
@@ -188,7 +192,7 @@ class ObstacleSystem:
             while self.next_heartbeat_us <= now_us:
                 self.next_heartbeat_us += 1_000_000
         if now_us >= self.next_report_us:
-            p, v = self.track.state(now_us * 1e-6)
+            p, v = self.track.state(now_us * 1e-6 if motion_s is None else motion_s)
             p_meas = p + self._position_error.sample(now_us, self.rng.standard_normal(3))  # white: p + L w, w ~ N(0, I)
             v_meas = np.full(3, _NAN) if self._Lv is None else v + self._Lv @ self.rng.standard_normal(3)
             out.extend(self._reports(now_us, p_meas, v_meas, own))

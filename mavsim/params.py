@@ -1,8 +1,10 @@
-"""The small PX4 parameter set mavsim serves (PARAM_REQUEST_LIST/READ, PARAM_SET).
+"""The parameter store mavsim serves (PARAM_REQUEST_LIST/READ, PARAM_SET).
 
-Integer parameters travel as PX4 sends them: ``MAV_PARAM_TYPE_INT32`` with the
-int32 bits copied into the float field ("bytewise" encoding, as MAVSDK and
-QGroundControl expect from PX4).
+The parameters themselves, name -> (default, MAV_PARAM_TYPE, min, max), are the autopilot
+personality's (:attr:`mavsim.personalities.base.Personality.params`). How integer parameters
+travel is the personality's choice too (``ints_bytewise``): with the int32 bits copied into
+the float field ("bytewise" encoding, as MAVSDK and QGroundControl expect from PX4), or as
+the float of their value (ArduPilot's encoding, whatever their MAV_PARAM_TYPE).
 """
 
 from __future__ import annotations
@@ -13,37 +15,25 @@ import struct
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_PARAMS", "ParamStore", "check_param_value", "PARAM_TYPE_INT32", "PARAM_TYPE_REAL32"]
+__all__ = ["ParamTable", "ParamStore", "check_param_value", "PARAM_TYPE_INT8", "PARAM_TYPE_INT16",
+           "PARAM_TYPE_INT32", "PARAM_TYPE_REAL32"]
 
+PARAM_TYPE_INT8 = 2
+PARAM_TYPE_INT16 = 4
 PARAM_TYPE_INT32 = 6
 PARAM_TYPE_REAL32 = 9
+#: MAV_PARAM_TYPE values of integers (UINT8 1 .. INT64 8).
+_INTEGER_TYPES = frozenset(range(1, 9))
 
-#: name -> (default, type, min, max). Defaults as in PX4 main.
-DEFAULT_PARAMS: dict[str, tuple[float, int, float, float]] = {
-    "COM_OF_LOSS_T": (1.0, PARAM_TYPE_REAL32, 0.0, 60.0),
-    "COM_OBL_RC_ACT": (0, PARAM_TYPE_INT32, 0, 7),
-    "COM_DISARM_LAND": (2.0, PARAM_TYPE_REAL32, -1.0, 20.0),
-    "COM_DISARM_PRFLT": (10.0, PARAM_TYPE_REAL32, -1.0, 20.0),
-    "COM_RCL_EXCEPT": (0, PARAM_TYPE_INT32, 0, 31),
-    "COM_RC_IN_MODE": (3, PARAM_TYPE_INT32, 0, 4),
-    "MIS_TAKEOFF_ALT": (2.5, PARAM_TYPE_REAL32, 0.0, 100.0),
-    "MPC_XY_VEL_MAX": (12.0, PARAM_TYPE_REAL32, 0.0, 20.0),
-    "MPC_XY_CRUISE": (5.0, PARAM_TYPE_REAL32, 3.0, 20.0),
-    "MPC_Z_VEL_MAX_UP": (3.0, PARAM_TYPE_REAL32, 0.5, 8.0),
-    "MPC_Z_VEL_MAX_DN": (1.5, PARAM_TYPE_REAL32, 0.5, 4.0),
-    "MPC_TKO_SPEED": (1.5, PARAM_TYPE_REAL32, 1.0, 5.0),
-    "MPC_LAND_SPEED": (0.7, PARAM_TYPE_REAL32, 0.6, 2.0),
-    "MAV_SYS_ID": (1, PARAM_TYPE_INT32, 1, 250),
-    "NAV_DLL_ACT": (0, PARAM_TYPE_INT32, 0, 6),
-}
+#: name -> (default, MAV_PARAM_TYPE, min, max).
+ParamTable = dict[str, tuple[float, int, float, float]]
 
-
-def check_param_value(name: str, value: float) -> str | None:
-    """Return why ``value`` is not acceptable for ``name``, or None if it is."""
-    default, ptype, lo, hi = DEFAULT_PARAMS[name]
+def check_param_value(table: ParamTable, name: str, value: float) -> str | None:
+    """Return why ``value`` is not acceptable for ``name`` of ``table``, or None if it is."""
+    default, ptype, lo, hi = table[name]
     if not math.isfinite(value):
         return f"must be finite, got {value}"
-    if ptype == PARAM_TYPE_INT32 and value != int(value):
+    if ptype in _INTEGER_TYPES and value != int(value):
         return f"must be an integer, got {value}"
     if not lo <= value <= hi:
         return f"must be in [{lo}, {hi}], got {value}"
@@ -59,10 +49,17 @@ def _wire_to_int(f: float) -> int:
 
 
 class ParamStore:
-    """Current parameter values, ordered as PX4 lists them (by index)."""
+    """Current values of the parameters of ``table``, listed by name (the index order).
 
-    def __init__(self, overrides: dict[str, float] | None = None) -> None:
-        self._values = {k: float(v[0]) for k, v in DEFAULT_PARAMS.items()}
+    ``overrides`` (name -> value) replace defaults; their names and values are checked by
+    the caller (the scenario reader). ``ints_bytewise``: integers travel with their int32 bits in
+    the float field (PX4); False: as the float of their value (ArduPilot).
+    """
+
+    def __init__(self, table: ParamTable, overrides: dict[str, float] | None = None, ints_bytewise: bool = True) -> None:
+        self.table = table
+        self.ints_bytewise = ints_bytewise
+        self._values = {k: float(v[0]) for k, v in table.items()}
         for k, v in (overrides or {}).items():
             self._values[k] = float(v)
         self.names = sorted(self._values)
@@ -78,21 +75,23 @@ class ParamStore:
 
     def wire(self, name: str) -> tuple[float, int]:
         """``(param_value, param_type)`` as sent in PARAM_VALUE."""
-        ptype = DEFAULT_PARAMS[name][1]
+        ptype = self.table[name][1]
         v = self._values[name]
-        return (_int_to_wire(int(v)) if ptype == PARAM_TYPE_INT32 else v), ptype
+        if ptype == PARAM_TYPE_INT32 and self.ints_bytewise:
+            return _int_to_wire(int(v)), ptype
+        return v, ptype
 
     def set_from_wire(self, name: str, value: float, ptype: int) -> str | None:
         """Apply a PARAM_SET; return a reason if rejected (the value is then unchanged)."""
         if name not in self._values:
             return f"unknown parameter {name!r}"
-        want = DEFAULT_PARAMS[name][1]
-        if want == PARAM_TYPE_INT32:
+        want = self.table[name][1]
+        if want == PARAM_TYPE_INT32 and self.ints_bytewise:
             # PX4 decodes bytewise; accept a float-typed integral value as a courtesy.
             v = float(_wire_to_int(value)) if ptype == PARAM_TYPE_INT32 else value
         else:
             v = value
-        problem = check_param_value(name, v)
+        problem = check_param_value(self.table, name, v)
         if problem:
             return f"{name} {problem}"
         self._values[name] = float(v)

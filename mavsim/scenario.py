@@ -6,21 +6,24 @@ its one typed accessor, which belong together so that each key sits beside its c
 mavsim owns ``[sim]`` and ``[world]`` (unknown keys there are rejected, naming file,
 section and key) and reads named keys of the shared sections: ``[scenario]`` (name,
 description, duration_s), ``[vehicle]`` (radius_m, start_ned_m), ``[mission]``
-(goal_ned_m and, with it, the required goal_tolerance_m: the one value both programs
-read) and ``[map]`` (walls, static obstacles, for collision
-truth). Sections owned by the companion (``[planner]``, ``[estimator]``, the rest of
+(goal_ned_m, at most 0.5 m below the local origin, and with it the required
+goal_tolerance_m: the one value both programs read; for a ``plan_file`` mission the goal is
+its last NAV_WAYPOINT, read from the file for the referee) and ``[map]`` (walls, static
+obstacles, for collision truth). Sections owned by the companion (``[planner]``, ``[estimator]``, the rest of
 ``[mission]``) are not inspected.
 
 ``[sim]`` keys (all optional)
 -----------------------------
 vehicle : str, default ``"lag"``
     The vehicle's velocity response: ``"lag"``, a first-order lag (the two keys below);
+    or one an autopilot personality brings (:data:`mavsim.personalities.VEHICLE_PROFILES`):
     ``"px4"``, PX4's PID velocity loop against SIH's linear drag with an attitude lag
-    (:mod:`mavsim.px4_response`), which responds like PX4 SITL (docs/VEHICLE_PROFILES.md).
+    (:mod:`mavsim.personalities.px4_response`), which responds like PX4 SITL
+    (docs/VEHICLE_PROFILES.md).
 velocity_time_constant_s : float, default 0.3
     Time constant of the first-order velocity response (s); ``vehicle = "lag"`` only.
 accel_max_mps2 : float, default 4.0
-    Bound on the norm of the vehicle acceleration (m/s^2); ``vehicle = "lag"`` only.
+    Bound on the norm of the vehicle acceleration (m/s^2, at most 20); ``vehicle = "lag"`` only.
 physics_step_s : float, default 0.01
     Fixed physics step (s); ``advance`` may end on a shorter partial step.
 position_noise_cov_m2 : 3x3, default 0.001 I
@@ -40,13 +43,21 @@ velocity_bias_mps : 3 numbers, default [0, 0, 0]
     to 0.5 m/s for seconds).
 velocity_bias_period_s : float, default 20
     Its period (s).
+estimator_resets : list of [t_s, dn, de, dd], default none
+    Resets of the autopilot's estimator (at most 100): at simulated time ``t_s`` (s since boot)
+    the reported position estimate (LOCAL_POSITION_NED, ODOMETRY, GLOBAL_POSITION_INT) steps by
+    ``[dn, de, dd]`` (m, NED, each at most 100 m in size; the steps add up) and ODOMETRY's
+    ``reset_counter`` counts one more, as PX4's EKF does when it resets its position (GPS lost
+    and regained). The truth and the vehicle's motion do not jump.
 start_airborne : bool, default ``start_ned_m[2] < 0``
     Spawn in the air, hovering. With ``false`` the start point is put on the ground.
 start_armed : bool, default ``start_airborne``
     Spawn armed. Airborne and disarmed, the vehicle is held in place (as on a stand)
     until armed, so a companion can use the ground flow (select OFFBOARD, arm).
-start_mode : str, default ``"AUTO.LOITER"`` airborne, ``"POSCTL"`` on the ground
-    One of POSCTL, AUTO.LOITER, AUTO.TAKEOFF, AUTO.LAND, AUTO.RTL, OFFBOARD.
+start_mode : str, default the autopilot's (PX4: ``"AUTO.LOITER"`` airborne, ``"POSCTL"`` on the ground)
+    A mode of the autopilot personality (PX4: POSCTL, AUTO.LOITER, AUTO.TAKEOFF, AUTO.LAND,
+    AUTO.RTL, OFFBOARD). Unset, :attr:`SimConfig.start_mode` is None and the simulator
+    takes its personality's default.
 start_yaw_rad : float, default 0.0
 home_lat_deg, home_lon_deg, home_alt_m : float
     Geodetic position of the local origin (PX4 SITL default 47.397742, 8.545594, 488.0);
@@ -58,13 +69,15 @@ geoid_separation_m : float, default 50.0
     OPEN_DRONE_ID_LOCATION ``altitude_geodetic``) is sent with them. The default is an
     illustrative non-zero value (on Earth it lies between about -106 and +85 m) so that a
     receiver which confuses the two datums misplaces that traffic vertically.
-arming_delay_s : float, default 0.0
-    Arming is denied this long after boot (real PX4 needs a few seconds).
+arming_delay_s : float, default the autopilot's (PX4: 0; ArduPilot: 5 on the ground, 0 airborne)
+    Arming is denied this long after boot (real PX4 needs a few seconds). For ArduPilot it is
+    when its EKF has an absolute position (readiness; SITL takes about 41 s).
 offboard_reject_ack : int, default 0
     COMMAND_ACK result when OFFBOARD is refused for lack of a setpoint stream (PX4
     main answers 0 and keeps the mode; older builds answer 1).
 params : table, default {}
-    Overrides of PX4 parameters (see :mod:`mavsim.params`), e.g. ``{COM_OF_LOSS_T = 1.0}``.
+    Overrides of the autopilot's parameters (its personality's table; PX4's, e.g.
+    ``{COM_OF_LOSS_T = 1.0}``).
 stream_rates_hz : table, default {}
     Overrides of telemetry rates by message name, e.g. ``{ATTITUDE = 50.0}``.
 
@@ -105,6 +118,7 @@ obstacles : array of tables ``[[world.obstacles]]`` with name, radius_m, start_n
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import tomllib
@@ -115,8 +129,9 @@ from typing import Any
 import numpy as np
 
 from mavsim.errors import ScenarioError
-from mavsim.params import DEFAULT_PARAMS, check_param_value
-from mavsim.vehicle import VEHICLE_PROFILES
+from mavsim.geo import global_to_ned
+from mavsim.params import ParamTable, check_param_value
+from mavsim.personalities import PERSONALITIES, VEHICLE_PROFILES
 
 logger = logging.getLogger(__name__)
 
@@ -131,13 +146,19 @@ __all__ = [
     "MODE_NAMES",
 ]
 
-#: Mode names accepted by ``start_mode`` (PX4 flight-mode names).
-MODE_NAMES = ("POSCTL", "AUTO.LOITER", "AUTO.TAKEOFF", "AUTO.LAND", "AUTO.RTL", "OFFBOARD")
+#: Mode names accepted by ``start_mode``: every registered personality's (the simulator
+#: checks that its own personality has the mode).
+MODE_NAMES = tuple(dict.fromkeys(m for p in PERSONALITIES.values() for m in p.mode_names))
+#: Parameters and streams ``[sim] params`` and ``stream_rates_hz`` may name: every personality's.
+_PARAMS: ParamTable = {k: v for p in reversed(PERSONALITIES.values()) for k, v in p.params.items()}
+_STREAMS = tuple(dict.fromkeys(n for p in PERSONALITIES.values() for n in p.stream_rates_hz))
 
 
 @dataclass(frozen=True)
 class SimConfig:
-    """Vehicle physics, sensor noise and PX4 behaviour settings (``[sim]``)."""
+    """Vehicle physics, sensor noise and autopilot behaviour settings (``[sim]``).
+
+    ``start_mode`` None: the autopilot personality's default for ``start_airborne``."""
 
     vehicle: str = "lag"
     velocity_time_constant_s: float = 0.3
@@ -148,15 +169,16 @@ class SimConfig:
     velocity_noise_cov_m2ps2: np.ndarray = field(default_factory=lambda: 1e-3 * np.eye(3))
     velocity_bias_mps: np.ndarray = field(default_factory=lambda: np.zeros(3))
     velocity_bias_period_s: float = 20.0
+    estimator_resets: tuple[tuple[float, tuple[float, float, float]], ...] = ()
     start_airborne: bool = True
     start_armed: bool = True
-    start_mode: str = "AUTO.LOITER"
+    start_mode: str | None = None
     start_yaw_rad: float = 0.0
     home_lat_deg: float = 47.397742
     home_lon_deg: float = 8.545594
     home_alt_m: float = 488.0
     geoid_separation_m: float = 50.0
-    arming_delay_s: float = 0.0
+    arming_delay_s: float | None = None
     offboard_reject_ack: int = 0
     params: dict[str, float] = field(default_factory=dict)
     stream_rates_hz: dict[str, float] = field(default_factory=dict)
@@ -224,6 +246,14 @@ class Scenario:
     source: str = "<dict>"
 
 
+#: How far below the local origin (NED ``z > 0``) ``[mission] goal_ned_m`` may lie, metres:
+#: further down is under the ground at home. The companion reads the same key with the same
+#: bound (``companion.loop.config.GOAL_BELOW_ORIGIN_MAX_M``; a test holds them equal).
+GOAL_BELOW_ORIGIN_MAX_M = 0.5
+#: Largest ``[sim] accel_max_mps2`` (m/s^2): about 2 g, a multirotor's (the companion's
+#: planner has the same bound on its own acceleration keys).
+MAX_ACCEL_MPS2 = 20.0
+
 #: Largest scenario file read (bytes), waypoints per obstacle, walls and static obstacles.
 MAX_SCENARIO_BYTES = 1 << 20
 MAX_WAYPOINTS = 10_000
@@ -231,7 +261,7 @@ MAX_MAP_ITEMS = 256
 
 SIM_KEYS = {
     "vehicle", "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2", "position_noise_correlation_s",
-    "velocity_bias_mps", "velocity_bias_period_s",
+    "velocity_bias_mps", "velocity_bias_period_s", "estimator_resets",
     "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
     "home_lat_deg", "home_lon_deg", "home_alt_m", "geoid_separation_m", "arming_delay_s", "offboard_reject_ack",
     "params", "stream_rates_hz",
@@ -355,25 +385,39 @@ def _velocity_bias(s: _Section) -> np.ndarray:
     return rate
 
 
+def _estimator_resets(s: _Section) -> tuple[tuple[float, tuple[float, float, float]], ...]:
+    """``estimator_resets``: rows ``[t_s, dn, de, dd]``, t_s >= 0, steps at most 100 m; sorted by time."""
+    if not s.has("estimator_resets"):
+        return ()
+    raw = s.table["estimator_resets"]
+    try:
+        a = np.array(raw, dtype=float).reshape(-1, 4) if isinstance(raw, list) and raw else None
+    except (TypeError, ValueError):
+        a = None
+    if a is None or len(a) != len(raw) or not np.all(np.isfinite(a)) or len(a) > 100:
+        raise s.err("estimator_resets", f"must be a list of at most 100 rows [t_s, dn, de, dd] of finite numbers, got {raw!r}")
+    if np.any(a[:, 0] < 0.0) or np.any(np.abs(a[:, 1:]) > 100.0):
+        raise s.err("estimator_resets", "each t_s must be >= 0 and each step at most 100 m in size")
+    return tuple((float(r[0]), (float(r[1]), float(r[2]), float(r[3]))) for r in a[np.argsort(a[:, 0], kind="stable")])
+
+
 def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
     s = _Section(src, "sim", raw, SIM_KEYS)
     airborne = s.boolean("start_airborne", start_z < 0)
-    mode = s.string("start_mode", "AUTO.LOITER" if airborne else "POSCTL")
-    if mode not in MODE_NAMES:
+    mode = s.string("start_mode") if s.has("start_mode") else None
+    if mode is not None and mode not in MODE_NAMES:
         raise s.err("start_mode", f"must be one of {', '.join(MODE_NAMES)}, got {mode!r}")
     params = s.table_of_numbers("params")
     for name, value in params.items():
-        if name not in DEFAULT_PARAMS:
-            raise s.err(f"params.{name}", f"unknown parameter (known: {', '.join(sorted(DEFAULT_PARAMS))})")
-        problem = check_param_value(name, value)
+        if name not in _PARAMS:
+            raise s.err(f"params.{name}", f"unknown parameter (known: {', '.join(sorted(_PARAMS))})")
+        problem = check_param_value(_PARAMS, name, value)
         if problem:
             raise s.err(f"params.{name}", problem)
-    from mavsim.telemetry import DEFAULT_RATES_HZ  # local: telemetry imports scenario types
-
     rates = s.table_of_numbers("stream_rates_hz")
     for name, rate in rates.items():
-        if name not in DEFAULT_RATES_HZ:
-            raise s.err(f"stream_rates_hz.{name}", f"unknown stream (known: {', '.join(DEFAULT_RATES_HZ)})")
+        if name not in _STREAMS:
+            raise s.err(f"stream_rates_hz.{name}", f"unknown stream (known: {', '.join(_STREAMS)})")
         if not 0.0 <= rate <= 1000.0:
             raise s.err(f"stream_rates_hz.{name}", f"must be in [0, 1000] Hz, got {rate}")
     vehicle = s.string("vehicle", "lag")
@@ -386,13 +430,14 @@ def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
     return SimConfig(
         vehicle=vehicle,
         velocity_time_constant_s=s.number("velocity_time_constant_s", 0.3, positive=True),
-        accel_max_mps2=s.number("accel_max_mps2", 4.0, positive=True),
+        accel_max_mps2=s.number("accel_max_mps2", 4.0, positive=True, hi=MAX_ACCEL_MPS2),
         physics_step_s=s.number("physics_step_s", 0.01, lo=1e-4, hi=0.1),
         position_noise_cov_m2=s.covariance("position_noise_cov_m2", 1e-3 * np.eye(3)),
         position_noise_correlation_s=s.number("position_noise_correlation_s", 0.0, lo=0.0, hi=3600.0),
         velocity_noise_cov_m2ps2=s.covariance("velocity_noise_cov_m2ps2", 1e-3 * np.eye(3)),
         velocity_bias_mps=_velocity_bias(s),
         velocity_bias_period_s=s.number("velocity_bias_period_s", 20.0, positive=True, hi=3600.0),
+        estimator_resets=_estimator_resets(s),
         start_airborne=airborne,
         start_armed=s.boolean("start_armed", airborne),
         start_mode=mode,
@@ -401,7 +446,7 @@ def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
         home_lon_deg=s.number("home_lon_deg", 8.545594, lo=-180.0, hi=180.0),
         home_alt_m=s.number("home_alt_m", 488.0, lo=-500.0, hi=9000.0),
         geoid_separation_m=s.number("geoid_separation_m", 50.0, lo=-120.0, hi=120.0),
-        arming_delay_s=s.number("arming_delay_s", 0.0, lo=0.0, hi=60.0),
+        arming_delay_s=s.number("arming_delay_s", lo=0.0, hi=60.0) if s.has("arming_delay_s") else None,
         offboard_reject_ack=s.integer("offboard_reject_ack", 0, lo=0, hi=4),
         params=params,
         stream_rates_hz=rates,
@@ -511,6 +556,11 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario
         os_ = _Section(source, f"map.static_obstacles[{i}]", o)
         statics.append(StaticObstacle(os_.vector3("center_ned_m"), os_.number("radius_m", lo=0.0)))
     goal = mission.vector3("goal_ned_m") if mission.has("goal_ned_m") else None
+    if goal is None and mission.has("plan_file"):
+        goal = _mission_end(mission, source, sim)
+    if goal is not None and goal[2] > GOAL_BELOW_ORIGIN_MAX_M:
+        raise mission.err("goal_ned_m", f"z = {goal[2]:g} is below the ground at the local origin (NED, z down); "
+                                        f"must be at most {GOAL_BELOW_ORIGIN_MAX_M:g} (e.g. -5 for 5 m up)")
     return Scenario(
         name=sc.string("name", Path(source).stem if source != "<dict>" else "scenario"),
         description=sc.string("description", ""),
@@ -529,8 +579,72 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario
     )
 
 
+#: Largest mission file mavsim reads for the truth's goal (bytes).
+_MAX_PLAN_BYTES = 4 * 1024 * 1024
+
+
+def _mission_end(mission: _Section, source: str, sim: SimConfig) -> np.ndarray | None:
+    """The truth's goal of a ``[mission] plan_file`` mission: its last NAV_WAYPOINT (16) in the
+    local frame about home (a QGroundControl ``.plan``, or ``QGC WPL 110``; altitude relative
+    to home in frame 3, AMSL in frame 0). None when the file has no waypoint; the companion
+    checks the file itself, this reads only what the referee needs."""
+    import json
+
+    raw = mission.string("plan_file", "")
+    path = Path(raw).expanduser()
+    if not path.is_absolute() and not source.startswith("<"):
+        path = Path(source).parent / path
+    try:
+        with path.open("rb") as f:
+            text = f.read(_MAX_PLAN_BYTES + 1).decode("utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise mission.err("plan_file", f"cannot read {path}: {exc}") from None
+    rows = []   # (frame, command, lat, lon, alt)
+    try:
+        if text.lstrip().startswith("QGC WPL"):
+            for line in text.splitlines()[1:]:
+                f = line.split("\t")
+                if len(f) >= 12:
+                    rows.append((int(f[2]), int(f[3]), float(f[8]), float(f[9]), float(f[10])))
+        else:
+            for item in json.loads(text)["mission"]["items"]:
+                p = item["params"]
+                rows.append((int(item["frame"]), int(item["command"]), float(p[4]), float(p[5]), float(p[6])))
+    except (ValueError, KeyError, TypeError, IndexError) as exc:
+        raise mission.err("plan_file", f"{path}: not a mission file mavsim can read ({exc})") from None
+    waypoints = [r for r in rows if r[1] == 16 and r[0] in (0, 3, 5, 6)]
+    if not waypoints:
+        return None
+    frame, _, lat, lon, alt = waypoints[-1]
+    amsl = alt if frame in (0, 5) else sim.home_alt_m + alt
+    return np.array(global_to_ned(lat, lon, amsl, sim.home_lat_deg, sim.home_lon_deg, sim.home_alt_m))
+
+
+def shipped_scenario_names() -> list[str]:
+    """The names of the scenarios shipped with the wheel (``configs/*.toml``, installed as the
+    package ``companion.scenarios``); empty when that package is not installed."""
+    from importlib import resources
+
+    try:
+        folder = resources.files("companion.scenarios")
+    except ModuleNotFoundError:
+        return []
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def shipped_scenario(text: str) -> Path | None:
+    """The file of the shipped scenario named ``text`` (``antipodal`` or ``antipodal.toml``), or None:
+    ``mavsim --scenario NAME`` resolves names as every ``companion`` command does."""
+    from importlib import resources
+
+    name = text[:-5] if text.endswith(".toml") else text
+    if "/" in text or name not in shipped_scenario_names():
+        return None
+    return Path(str(resources.files("companion.scenarios") / f"{name}.toml"))
+
+
 def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario file.
+    """Read and validate a scenario file (a path, or a shipped scenario's name).
 
     Raises
     ------
@@ -538,11 +652,16 @@ def load_scenario(path: str | Path) -> Scenario:
         If the file cannot be read or parsed, or a section, key or value is bad.
     """
     p = Path(path)
+    if not p.exists():
+        p = shipped_scenario(str(path)) or p
     try:
         with p.open("rb") as f:
             raw = f.read(MAX_SCENARIO_BYTES + 1)
     except IsADirectoryError:
         raise ScenarioError(f"{p}: is a directory, not a scenario file") from None
+    except FileNotFoundError:
+        names = ", ".join(shipped_scenario_names())
+        raise ScenarioError(f"{p}: no such scenario file, and not a shipped scenario ({names})") from None
     except OSError as exc:
         raise ScenarioError(f"{p}: cannot read scenario file: {exc.strerror or exc}") from None
     if len(raw) > MAX_SCENARIO_BYTES:
@@ -554,6 +673,15 @@ def load_scenario(path: str | Path) -> Scenario:
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{p}: not valid TOML: {exc}") from None
     return scenario_from_dict(data, str(p))
+
+
+def on_the_ground(scenario: Scenario) -> Scenario:
+    """``scenario`` started as PX4 SITL boots: on the ground below its start point (z = 0, NED
+    metres), disarmed, in the autopilot's ground start mode (PX4: POSCTL), so a companion arms
+    and takes off (``mavsim --on-ground``)."""
+    start = np.array([scenario.start_ned_m[0], scenario.start_ned_m[1], 0.0])
+    sim = dataclasses.replace(scenario.sim, start_airborne=False, start_armed=False, start_mode=None)
+    return dataclasses.replace(scenario, start_ned_m=start, sim=sim)
 
 
 def default_scenario() -> Scenario:

@@ -1,7 +1,9 @@
-"""PX4 telemetry: the messages a PX4 vehicle streams, built from simulated state.
+"""Telemetry: the messages the autopilot streams, built from simulated state.
 
-Rates follow PX4's defaults on the offboard link (``DEFAULT_RATES_HZ``); a client
-changes them per link with MAV_CMD_SET_MESSAGE_INTERVAL. Timestamps are simulated
+Which streams it sends and at what rates is its personality's
+(:attr:`mavsim.personalities.base.Personality.stream_rates_hz`, PX4's defaults on the
+offboard link for PX4), as are the HEARTBEAT's identity and mode fields; a client
+changes rates per link with MAV_CMD_SET_MESSAGE_INTERVAL. Timestamps are simulated
 time since boot (``time_boot_ms`` ms, ``time_usec`` us). Reported positions and
 velocities are the noisy estimate; ODOMETRY carries the noise covariance itself
 (position block of ``pose_covariance`` and velocity block of ``velocity_covariance``,
@@ -17,36 +19,21 @@ import math
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
-from mavsim.px4 import Commander
+from mavsim.personalities.base import Commander, Personality
 from mavsim.vehicle import VehicleState
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_RATES_HZ", "STREAM_IDS", "TelemetryBuilder", "odometry_message", "upper_triangle_6x6"]
+__all__ = ["STREAM_IDS", "TelemetryBuilder", "odometry_message", "upper_triangle_6x6"]
 
-#: Stream name -> default rate (Hz).
-DEFAULT_RATES_HZ: dict[str, float] = {
-    "HEARTBEAT": 1.0,
-    "SYS_STATUS": 5.0,
-    "EXTENDED_SYS_STATE": 5.0,
-    "LOCAL_POSITION_NED": 30.0,
-    "ODOMETRY": 30.0,
-    "ATTITUDE": 30.0,
-    "GLOBAL_POSITION_INT": 50.0,
-    "HOME_POSITION": 0.5,
-    "GPS_RAW_INT": 0.0,  # off unless set or requested (MAV_CMD_REQUEST_MESSAGE 24)
-    "TIMESYNC": 10.0,  # requests (tc1 0, ts1 the boot clock in ns), as PX4 sends them on its links
-}
 #: Stream name -> MAVLink message id.
 STREAM_IDS: dict[str, int] = {
     "HEARTBEAT": 0, "SYS_STATUS": 1, "ATTITUDE": 30, "LOCAL_POSITION_NED": 32, "GLOBAL_POSITION_INT": 33,
     "HOME_POSITION": 242, "EXTENDED_SYS_STATE": 245, "ODOMETRY": 331, "GPS_RAW_INT": 24,
-    "TIMESYNC": 111,
+    "TIMESYNC": 111, "GPS_GLOBAL_ORIGIN": 49, "POSITION_TARGET_LOCAL_NED": 85, "EKF_STATUS_REPORT": 193,
 }
 MSG_AUTOPILOT_VERSION = 148
 
-MAV_TYPE_QUADROTOR = 2
-MAV_AUTOPILOT_PX4 = 12
 EARTH_RADIUS_M = 6378137.0
 # gyro | accel | mag | abs pressure | GPS | angular rate ctl | attitude ctl | yaw pos | z/alt ctl | xy ctl | motors
 _SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x2000 | 0x4000 | 0x8000
@@ -77,12 +64,12 @@ def _yaw_quat(roll: float, pitch: float, yaw: float) -> list[float]:
 
 def odometry_message(time_us: int, pos: np.ndarray, vel: np.ndarray, q: list[float],
                      rates: tuple[float, float, float], pose_cov: list[float], vel_cov: list[float],
-                     estimator_type: int) -> mavlink2.MAVLink_odometry_message:
+                     estimator_type: int, reset_counter: int = 0) -> mavlink2.MAVLink_odometry_message:
     """ODOMETRY in LOCAL_NED (frame_id = child_frame_id = 1), velocity in NED."""
     return mavlink2.MAVLink_odometry_message(
         time_us, 1, 1, float(pos[0]), float(pos[1]), float(pos[2]), q,
         float(vel[0]), float(vel[1]), float(vel[2]), rates[0], rates[1], rates[2],
-        pose_cov, vel_cov, 0, estimator_type, 100)
+        pose_cov, vel_cov, int(reset_counter), estimator_type, 100)
 
 
 class TelemetryBuilder:
@@ -97,16 +84,21 @@ class TelemetryBuilder:
     geoid_separation_m : float
         Height of the geoid above the WGS-84 ellipsoid, metres: GPS_RAW_INT reports
         ``alt_ellipsoid = alt + geoid_separation_m`` as a GNSS receiver does.
+    personality : Personality
+        The autopilot: HEARTBEAT type and autopilot, AUTOPILOT_VERSION's version and ids.
     """
 
     def __init__(self, position_cov_m2: np.ndarray, velocity_cov_m2ps2: np.ndarray,
                  home_lat_deg: float, home_lon_deg: float, home_alt_m: float,
-                 geoid_separation_m: float = 0.0) -> None:
+                 geoid_separation_m: float, personality: Personality) -> None:
+        self.personality = personality
         self._pose_cov = upper_triangle_6x6(position_cov_m2, 1e-4)
         self._vel_cov = upper_triangle_6x6(velocity_cov_m2ps2, 1e-4)
         self.home = (home_lat_deg, home_lon_deg, home_alt_m)
         self._cos_lat = math.cos(math.radians(home_lat_deg))
         self.geoid_separation_m = float(geoid_separation_m)
+        #: ODOMETRY's reset_counter: the estimator's resets so far (set by the simulator, ``[sim] estimator_resets``)
+        self.reset_counter = 0
 
     def global_from_local(self, p: np.ndarray) -> tuple[int, int, int]:
         """(lat degE7, lon degE7, alt mm AMSL) of a local NED point (flat earth)."""
@@ -118,9 +110,13 @@ class TelemetryBuilder:
               est_pos: np.ndarray, est_vel: np.ndarray):
         """The message with id ``msg_id`` at simulated time ``now_us``, or None if unknown."""
         ms = now_us // 1000
+        own = cmdr.message(msg_id, now_us, veh, est_pos, est_vel)
+        if own is not None:
+            return own
         if msg_id == 0:
+            p = self.personality
             return mavlink2.MAVLink_heartbeat_message(
-                MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_PX4, cmdr.base_mode, cmdr.custom_mode, cmdr.system_status, 3)
+                p.mav_type, p.mav_autopilot, cmdr.base_mode, cmdr.custom_mode, cmdr.system_status, 3)
         if msg_id == 32:
             return mavlink2.MAVLink_local_position_ned_message(
                 ms, float(est_pos[0]), float(est_pos[1]), float(est_pos[2]),
@@ -128,7 +124,8 @@ class TelemetryBuilder:
         if msg_id == 331:
             roll, pitch = veh.roll_pitch_rad
             return odometry_message(now_us, est_pos, est_vel, _yaw_quat(roll, pitch, veh.yaw_rad),
-                                    (0.0, 0.0, veh.yaw_rate_radps), self._pose_cov, self._vel_cov, 8)
+                                    (0.0, 0.0, veh.yaw_rate_radps), self._pose_cov, self._vel_cov, 8,
+                                    self.reset_counter)
         if msg_id == 30:
             roll, pitch = veh.roll_pitch_rad
             return mavlink2.MAVLink_attitude_message(ms, roll, pitch, veh.yaw_rad, 0.0, 0.0, veh.yaw_rate_radps)
@@ -149,24 +146,19 @@ class TelemetryBuilder:
             return mavlink2.MAVLink_sys_status_message(health, health, health, 150, 16200, 500, 90,
                                                        0, 0, 0, 0, 0, 0)
         if msg_id == 245:
-            if veh.on_ground:
-                landed = 1
-            elif cmdr.mode == "AUTO.TAKEOFF":
-                landed = 3
-            elif cmdr.mode == "AUTO.LAND" or (cmdr.mode == "AUTO.RTL" and veh.velocity_ned_mps[2] > 0.3):
-                landed = 4
-            else:
-                landed = 2
-            return mavlink2.MAVLink_extended_sys_state_message(0, landed)
+            return mavlink2.MAVLink_extended_sys_state_message(0, cmdr.landed_state(veh))
         if msg_id == 242:
             lat, lon, alt = self.global_from_local(np.zeros(3))
             return mavlink2.MAVLink_home_position_message(lat, lon, alt, 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
                                                           0.0, 0.0, 0.0, now_us)
         if msg_id == 111:
             return mavlink2.MAVLink_timesync_message(0, now_us * 1000)
+        if msg_id == 49:
+            lat, lon, alt = self.home
+            return mavlink2.MAVLink_gps_global_origin_message(round(lat * 1e7), round(lon * 1e7), round(alt * 1000), now_us)
         if msg_id == MSG_AUTOPILOT_VERSION:
-            # flight_sw_version 1.15.0 official (0xFF type byte)
+            p = self.personality
             return mavlink2.MAVLink_autopilot_version_message(
-                _CAPABILITIES, (1 << 24) | (15 << 16) | (0 << 8) | 0xFF, 0, 0, 0,
-                [0] * 8, [0] * 8, [0] * 8, 0x26AC, 0x0011, 1, [0] * 18)
+                _CAPABILITIES, p.flight_sw_version, 0, 0, 0,
+                [0] * 8, [0] * 8, [0] * 8, p.vendor_id, p.product_id, 1, [0] * 18)
         return None

@@ -1,8 +1,8 @@
 """Kinematic multicopter in local NED: pure functions, no clock.
 
-Two velocity responses, chosen per scenario by ``[sim] vehicle``: ``"lag"`` (below) and
-``"px4"``, PX4's PID velocity loop against SIH's linear drag with an attitude lag
-(:mod:`mavsim.px4_response`), which responds like PX4 SITL does.
+Velocity responses, chosen per scenario by ``[sim] vehicle``: ``"lag"`` (below), or a
+:class:`VelocityResponse` an autopilot personality brings (:mod:`mavsim.personalities`; PX4's
+PID velocity loop against SIH's linear drag, ``"px4"``, responds like PX4 SITL does).
 
 The lag model (per step ``dt``)::
 
@@ -24,19 +24,29 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 
-from mavsim.px4_response import ControllerState, Px4Response, controller_step
-
 logger = logging.getLogger(__name__)
 
-__all__ = ["VEHICLE_PROFILES", "VehicleParams", "VehicleState", "VehicleCommand", "step", "initial_state", "GRAVITY_MPS2"]
+__all__ = ["VelocityResponse", "VehicleParams", "VehicleState", "VehicleCommand", "step", "initial_state", "GRAVITY_MPS2"]
 
 GRAVITY_MPS2 = 9.80665
-#: Names of the velocity responses (``[sim] vehicle``).
-VEHICLE_PROFILES = ("lag", "px4")
 YAW_RATE_MAX_RADPS = 1.5  # heading change rate toward a yaw setpoint (PX4 MPC_YAWRAUTO_MAX ~ 45 deg/s)
+
+
+class VelocityResponse(Protocol):
+    """A velocity loop and airframe other than the lag: one physics step of the velocity.
+
+    Its hidden state (a controller's integral, the thrust's lag) rides in
+    :attr:`VehicleState.controller`: None at rest (spawned, on the ground).
+    """
+
+    def step(self, hidden: Any, velocity_mps: np.ndarray, velocity_dot_mps2: np.ndarray,
+             setpoint_mps: np.ndarray, dt: float) -> tuple[Any, np.ndarray]:
+        """The new hidden state and velocity (NED, m/s) after ``dt`` seconds toward
+        ``setpoint_mps`` (NED, m/s), from the velocity now and its last derivative (m/s^2)."""
 
 
 @dataclass(frozen=True)
@@ -49,16 +59,13 @@ class VehicleParams:
         First-order velocity time constant tau (s).
     accel_max_mps2 : float
         Bound on the acceleration norm while the motors are on (m/s^2).
-    profile : str
-        ``"lag"`` (the two values above) or ``"px4"`` (``px4``; the two values above unused).
-    px4 : Px4Response
-        The PX4 profile's gains, limits, lags and drag.
+    response : VelocityResponse or None
+        None: the lag (the two values above); else this response (the two values unused).
     """
 
     time_constant_s: float = 0.3
     accel_max_mps2: float = 4.0
-    profile: str = "lag"
-    px4: Px4Response = Px4Response()
+    response: VelocityResponse | None = None
 
 
 @dataclass(frozen=True)
@@ -73,8 +80,8 @@ class VehicleState:
         Heading (0 north, positive toward east) and its rate.
     on_ground : bool
         True while resting on the ground (z = 0).
-    controller : ControllerState
-        The PX4 profile's velocity-loop state (zero for the lag and on the ground).
+    controller : object
+        The velocity response's hidden state (None for the lag, at rest and on the ground).
     """
 
     position_ned_m: np.ndarray
@@ -83,7 +90,7 @@ class VehicleState:
     yaw_rad: float
     yaw_rate_radps: float
     on_ground: bool
-    controller: ControllerState = ControllerState.zero()
+    controller: Any = None
 
     @property
     def roll_pitch_rad(self) -> tuple[float, float]:
@@ -157,9 +164,9 @@ def step(state: VehicleState, command: VehicleCommand, dt: float, params: Vehicl
             rate = 0.0
         z3 = np.zeros(3)
         return VehicleState(p, z3, z3, yaw, rate, True)
-    controller = ControllerState.zero()
-    if command.motors_on and params.profile == "px4":
-        controller, v_new = controller_step(state.controller, v, state.accel_ned_mps2, v_cmd, dt, params.px4)
+    controller = None
+    if command.motors_on and params.response is not None:
+        controller, v_new = params.response.step(state.controller, v, state.accel_ned_mps2, v_cmd, dt)
         dv = v_new - v
     elif command.motors_on:
         dv = (v_cmd - v) * (1.0 - math.exp(-dt / params.time_constant_s))  # first-order lag
@@ -178,7 +185,7 @@ def step(state: VehicleState, command: VehicleCommand, dt: float, params: Vehicl
         on_ground = True
     yaw, rate = _yaw_step(state.yaw_rad, command, dt) if command.motors_on else (state.yaw_rad, 0.0)
     if on_ground:
-        controller = ControllerState.zero()
+        controller = None
     return VehicleState(p_new, v_new, dv / dt, yaw, rate, on_ground, controller)
 
 

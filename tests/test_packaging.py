@@ -28,8 +28,9 @@ def test_that_a_built_wheel_flies_the_shipped_antipodal_scenario_from_anywhere(t
     with zipfile.ZipFile(wheel) as zf:
         names = set(zf.namelist())
         zf.extractall(site)
-    for scenario in ("antipodal", "corridor", "single_obstacle"):
+    for scenario in ("antipodal", "corridor", "single_obstacle", "mission_survey"):
         assert f"companion/scenarios/{scenario}.toml" in names
+    assert "companion/scenarios/mission_survey.plan" in names      # the mission and fence it names
 
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()

@@ -16,29 +16,31 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
+import sys
 from pathlib import Path
 
 from companion.commands._argtypes import (
-    integer_at_least,
+    integer_between,
     non_negative_seconds,
     open_unit_interval,
     output_file,
-    positive_seconds,
+    seconds_up_to,
     seed,
 )
-from companion.errors import ConfigError
-from companion.offline.campaign import (
+from companion.commands._defaults import (
     DEFAULT_DURATION_S,
     EKF_CORRELATION_S,
     FAMILIES,
+    MAX_DURATION_S,
+    MAX_EPISODES,
     METHODS,
+    PROGRESS_MODES,
     VEHICLES,
-    format_table,
-    generate_scenario,
-    run_campaign,
-    write_scenario,
+    WORKERS_PER_CPU,
 )
-from companion.offline.campaign.progress import MODES as PROGRESS_MODES
+from companion.commands._help import DefaultsHelpFormatter
+from companion.errors import ConfigError
 
 logger = logging.getLogger(__name__)
 
@@ -58,29 +60,35 @@ def _methods(text: str) -> list[str]:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``campaign`` subcommand."""
     p = subparsers.add_parser("campaign", help="Monte Carlo safety campaign: randomised encounters, per method",
-                              description=__doc__.split("\n\n")[1], formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                              description=__doc__.split("\n\n")[1], formatter_class=DefaultsHelpFormatter)
+    cpus = os.cpu_count() or 1
     p.add_argument("--family", choices=FAMILIES, default="antipodal", help="kind of encounter")
-    p.add_argument("--episodes", type=integer_at_least(1), default=20, help="number of episodes (indices 0..N-1)")
+    p.add_argument("--episodes", type=integer_between(1, MAX_EPISODES, "the most one campaign holds"), default=20,
+                   help=f"number of episodes (indices 0..N-1), at most {MAX_EPISODES}")
     p.add_argument("--methods", type=_methods, default=list(METHODS), help="comma-separated planner formulations",
                    metavar=",".join(METHODS))
     p.add_argument("--seed", type=seed, default=0, help="campaign seed (episode i uses default_rng([seed, i]))")
-    p.add_argument("--workers", type=integer_at_least(1), default=None, help="local worker processes (default: CPU count)")
+    p.add_argument("--workers", type=integer_between(1, WORKERS_PER_CPU * cpus, f"{WORKERS_PER_CPU} per CPU, {cpus} CPUs"),
+                   default=None, help=f"local worker processes, at most {WORKERS_PER_CPU} per CPU "
+                                      f"({WORKERS_PER_CPU * cpus} here) (default: the CPU count, {cpus})")
     p.add_argument("--scheduler", metavar="ADDRESS", default=None,
                    help="run the episodes on a Dask distributed cluster (e.g. tcp://10.0.0.5:8786); "
                         "needs pip install 'ogccmpc[cluster]'")
-    p.add_argument("--episode", type=integer_at_least(0), default=None, metavar="I",
+    p.add_argument("--episode", type=integer_between(0, MAX_EPISODES - 1), default=None, metavar="I",
                    help="run only episode I of this campaign (reproduce one encounter)")
     p.add_argument("--save-scenario", metavar="FILE", default=None,
                    help="with --episode: also write the episode's scenario as a TOML file (fly it with companion demo)")
     p.add_argument("--c-min", type=open_unit_interval, default=0.90, help="contour of touch that may not be crossed")
-    p.add_argument("--duration", type=positive_seconds, default=DEFAULT_DURATION_S, help="simulated seconds per episode")
+    p.add_argument("--duration", type=seconds_up_to(MAX_DURATION_S, "one hour"), default=DEFAULT_DURATION_S,
+                   metavar="SECONDS", help=f"simulated seconds per episode, at most {MAX_DURATION_S:g}")
     p.add_argument("--noise-correlation", type=non_negative_seconds, default=0.0, metavar="SECONDS",
                    help="correlation time of the simulated drone position error and of every obstacle's measurement "
                         "error (Gauss-Markov, as an EKF's or a GNSS receiver's error wanders; same covariances, reported "
                         f"honestly); 0: white; {EKF_CORRELATION_S:g} s is the honest model of docs/CAMPAIGNS.md")
     p.add_argument("--vehicle", choices=VEHICLES, default="lag",
-                   help="mavsim's vehicle profile: lag (0.3 s lag, the planner's own model) or px4 (PX4's velocity "
-                        "loop against drag; the planner uses the response identified for it)")
+                   help="mavsim's vehicle profile: lag (0.3 s lag, the planner's own model), px4 (PX4's velocity "
+                        "loop against drag) or ardupilot (ArduCopter's jerk-limited shaping, flown by mavsim's ArduPilot personality: the "
+                        "companion engages it in GUIDED); the planner uses the response identified for it")
     p.add_argument("--results", metavar="FILE", default=None,
                    help="results file (JSON lines, one finished run per line, appended as runs finish; "
                         "default: beside --json with the suffix .jsonl, else campaign-FAMILY-seedS.jsonl; "
@@ -108,6 +116,8 @@ def results_path(args: argparse.Namespace) -> Path | None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the campaign, print the table, write JSON and figures if asked."""
+    from companion.offline.campaign import format_table, generate_scenario, run_campaign, write_scenario
+
     if not getattr(args, "verbose", 0):
         # Collisions and planner trouble are what a campaign counts: report them in the
         # table, not as hundreds of log lines from the worker processes.
@@ -142,4 +152,28 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         for path in result.plot(args.plot):
             print(f"wrote {path}")
-    return 0
+    return _exit_code(result, store)
+
+
+def _exit_code(result, store: Path | None) -> int:
+    """0 when every run was flown and scored; else 1, with one line saying how many were not.
+
+    A run that errored (or was lost with its worker) measured nothing: the table leaves it
+    out, so a campaign that is all errors would otherwise print an empty table and succeed.
+    """
+    failed = [r for r in result.results if r.error is not None]
+    if not failed and not result.lost:
+        return 0
+    total = len(result.results) + result.lost
+    what = []
+    if failed:
+        first = failed[0]
+        message = " ".join(str(first.error).split())  # one line, however the exception put it
+        message = message if len(message) <= 300 else message[:297] + "..."
+        what.append(f"{len(failed)} of {total} runs ended with an error (first: episode {first.episode} "
+                    f"{first.method}: {message})")
+    if result.lost:
+        what.append(f"{result.lost} of {total} runs were lost with their worker process")
+    where = f"; the runs are in {store}" if store is not None else ""
+    print(f"companion campaign: error: {'; '.join(what)}{where}", file=sys.stderr)
+    return 1

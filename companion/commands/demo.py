@@ -9,33 +9,13 @@ import socket
 import subprocess
 import sys
 import time
-from importlib import resources
 from pathlib import Path
 from typing import NamedTuple
 
-from companion.commands._argtypes import integer_at_least, positive_number, seed
+from companion.commands._argtypes import integer_at_least, positive_number, scenario_file, seed
+from companion.commands._view import add_view_arguments, open_view
 from companion.errors import ConfigError
-from companion.offline.crowd import MAX_SYSTEMS
-from companion.offline.report import format_report, truth_report
-
-SCENARIOS = ("antipodal", "corridor", "single_obstacle", "antipodal_px4sim")
-
-
-def resolve_scenario(name: str) -> Path:
-    """A shipped scenario's name (``antipodal``) or a path to a TOML file.
-
-    The shipped scenarios are the repository's ``configs/*.toml``, installed as the package
-    ``companion.scenarios`` so that a wheel finds them from any working directory.
-    """
-    path = Path(name)
-    if path.suffix == ".toml" and path.exists():
-        return path
-    if name in SCENARIOS:
-        shipped = Path(str(resources.files("companion.scenarios") / f"{name}.toml"))
-        if shipped.is_file():
-            return shipped
-    raise ConfigError(f"unknown scenario {name!r}: expected one of {', '.join(SCENARIOS)} or a .toml file")
-
+from companion.commands._defaults import FORMULATIONS, MAX_SYSTEMS
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -47,9 +27,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "processes over loopback UDP, like PX4 SITL."
         ),
     )
-    p.add_argument("scenario", nargs="?", default="antipodal", help=f"{' | '.join(SCENARIOS)} or a scenario .toml")
+    p.add_argument("scenario", nargs="?", default="antipodal", type=scenario_file,
+                   help="a shipped scenario's name (antipodal, corridor, single_obstacle, antipodal_px4sim, ...) "
+                        "or a scenario .toml")
     p.add_argument("--seed", type=seed, default=0, help="simulator noise seed (default 0)")
-    p.add_argument("--formulation", default=None, help="planner formulation (hyperplane, paper, deterministic, bhattacharyya)")
+    p.add_argument("--formulation", default=None, choices=FORMULATIONS, help="planner formulation (hyperplane, paper, deterministic, bhattacharyya)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--out", default=None, metavar="DIR", help="keep the tlogs, the ground-truth summary and the figures here")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -61,6 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--crowd", type=integer_at_least(0), default=0, metavar="N",
                    help=f"with --realtime: N extra stationary systems (at most {MAX_SYSTEMS}) report from 6-10 m beside the route "
                         "to the companion's obstacle port")
+    add_view_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -71,7 +54,7 @@ def _free_udp_port() -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    scenario = resolve_scenario(args.scenario)
+    scenario = Path(args.scenario)  # resolved by the parser (scenario_file)
     overrides = {}
     if args.formulation:
         overrides["formulation"] = args.formulation
@@ -82,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
     load_both(scenario, **overrides)  # both programs' sections, before anything starts
     if not args.realtime and (args.signing_key_file or args.signing_key_env):
         raise ConfigError("signing is for the UDP links of --realtime; the lockstep demo has none")
+    _check_signing_key(args)
     out = Path(args.out) if args.out else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -93,25 +77,70 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary, indent=2, default=str))
     else:
+        from companion.offline.report import format_report
+
         print(format_report(summary))
+        if summary.get("goal_reached") is False:
+            _say_why_not(scenario)
         if out is not None:
             print(f"outputs in {out}/")
+    return _realtime_failure(summary)
+
+
+def _say_why_not(scenario: Path) -> None:
+    """After "goal reached False": the scenario's own description, which says when it is not
+    meant to reach its goal in a closed loop (``single_obstacle``: one plan's terminal-only cost)."""
+    from companion.loop.config import load_scenario
+
+    description = load_scenario(scenario).description
+    if description:
+        print(f"the scenario says: {description}")
+
+
+def _check_signing_key(args: argparse.Namespace) -> None:
+    """Read the signing key once here, so a bad one is this command's one-line error (exit 2)
+    rather than a child process's, which the real-time demo would only report as an empty summary."""
+    from companion.mavlink.signing import SigningKeyError, load_signing_key
+
+    try:
+        load_signing_key(args.signing_key_file, args.signing_key_env)
+    except SigningKeyError as exc:
+        raise ConfigError(str(exc)) from None
+
+
+def _realtime_failure(summary: dict) -> int:
+    """0, or 1 with one line on stderr when a real-time demo's ``companion fly`` or mavsim failed."""
+    for key, program in (("fly_error", "companion fly"), ("sim_error", "mavsim")):
+        if summary.get(key):
+            last = [line for line in str(summary[key]).splitlines() if line.strip()]
+            print(f"companion demo: error: {program} failed: {last[-1] if last else 'no output'}", file=sys.stderr)
+            return 1
     return 0
 
 
 def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None) -> dict:
     from companion.offline.harness import run_lockstep  # imports mavsim: only the demo and campaign do
 
+    from companion.offline.harness import LOCKSTEP_EPOCH_S
+
+    view = open_view(args, threaded=False, time_offset_s=LOCKSTEP_EPOCH_S)
     t0 = time.perf_counter()
-    result = run_lockstep(
-        scenario,
-        seed=args.seed,
-        tlog_path=out / "companion.tlog" if out else None,
-        sim_tlog_path=out / "mavsim.tlog" if out else None,
-        **overrides,
-    )
+    try:
+        result = run_lockstep(
+            scenario,
+            seed=args.seed,
+            tlog_path=out / "companion.tlog" if out else None,
+            sim_tlog_path=out / "mavsim.tlog" if out else None,
+            after_tick=view,
+            **overrides,
+        )
+    finally:
+        if view is not None:
+            view.close()
     summary = result.summary()
     summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
+    if view is not None:
+        summary["view"] = view.summary(summary["wall_time_s"])
     if out is not None:
         (out / "truth.json").write_text(json.dumps(result.truth, indent=2, default=str))
         (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
@@ -195,6 +224,10 @@ def _start_fly(scenario: Path, args: argparse.Namespace, overrides: dict, out: P
         fly_cmd += ["--formulation", overrides["formulation"]]
     if "c_max" in overrides:
         fly_cmd += ["--no-c-max"]
+    if args.view is not None:
+        fly_cmd += ["--view", f"{args.view[0]}:{args.view[1]}"]
+    if args.mcap is not None:
+        fly_cmd += ["--mcap", str(args.mcap)]
     for flag, value in (("--signing-key-file", args.signing_key_file), ("--signing-key-env", args.signing_key_env)):
         if value is not None:  # the key itself never appears on a command line
             sim_cmd += [flag, value]
@@ -257,6 +290,8 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
     except json.JSONDecodeError:
         truth = {}
     # No truth (mavsim failed to report): its keys stay out rather than read "no collision".
+    from companion.offline.report import truth_report
+
     summary = {"mode": "realtime", **(truth_report(truth) if truth else {}), **summary}
     if not truth:
         summary["sim_error"] = (sim_err or "mavsim printed no summary")[-2000:]

@@ -4,23 +4,29 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import json
 import logging
+import signal
 import sys
 import time
 
-from companion.commands._argtypes import non_negative_seconds, output_file, positive_number, positive_seconds
+from companion.commands._argtypes import (
+    connection_string,
+    fence_file,
+    goal_spec,
+    mission_source,
+    integer_at_least,
+    non_negative_seconds,
+    output_file,
+    positive_number,
+    positive_seconds,
+    scenario_file,
+)
+from companion.commands._defaults import DEFAULT_URL, FORMULATIONS
+from companion.commands._flight_flags import goal_keywords, offboard_settings, planner_overrides
+from companion.commands._view import add_view_arguments, open_view
 from companion.errors import CompanionError, ConfigError
-from companion.loop.app import Companion
-from companion.loop.realtime import PlanWorker, run_realtime
-from companion.loop.stream_priority import STREAM_FIFO_PRIORITY, stream_priority
-from companion.loop.traffic_config import obstacle_link_name
-from companion.mavlink.link import DEFAULT_URL, open_link
-from companion.mavlink.tlog import TlogWriter
-from companion.offline.report import companion_report, format_report
-from companion.offline.scenario_file import load_both
-from companion.mavlink.signing import SigningKeyError, load_signing_key
+from companion.realtime.stream_priority import STREAM_FIFO_PRIORITY, stream_priority
 
 logger = logging.getLogger(__name__)
 
@@ -32,29 +38,65 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "fly",
         help="fly a scenario's mission over MAVLink in real time",
         description=(
-            "Connect to a PX4 autopilot, stream velocity setpoints, request OFFBOARD (confirmed from the "
-            "HEARTBEAT) and fly the scenario's mission around the obstacles heard on the link. Without "
+            "Connect to a PX4 or ArduPilot (ArduCopter) autopilot, stream velocity setpoints in its offboard mode "
+            "(PX4 OFFBOARD, ArduCopter GUIDED; confirmed from the HEARTBEAT) and fly the scenario's mission around "
+            "the obstacles heard on the link. ArduCopter is first waited for (its EKF's absolute position), asked "
+            "for its streams, switched to GUIDED, armed and taken off in GUIDED. Without "
             "--arm the companion does not arm: it waits for the pilot to arm, then streams setpoints and "
-            "requests OFFBOARD. If the vehicle leaves OFFBOARD, the companion stops commanding."
+            "requests OFFBOARD. If the vehicle leaves OFFBOARD, the companion stops commanding. "
+            "Ctrl-C or SIGTERM hands the vehicle back (Hold, while the setpoints still stream) before "
+            "stopping; a second one stops at once. Exit codes: 0 goal reached, 1 error (the sequence gave up), "
+            "2 bad input, 3 stopped (handed back, or never in control, or handed back after braking on trouble), 4 stopped without Hold confirmed, "
+            "5 pilot took over, 6 link lost (or no autopilot heard), 7 the autopilot's own failsafe took the vehicle "
+            "out of OFFBOARD (after link silence, or shown by its HEARTBEAT)."
         ),
     )
-    p.add_argument("--connect", default=DEFAULT_URL, help=f"pymavlink connection string (default {DEFAULT_URL})")
+    p.add_argument("--connect", type=connection_string, default=DEFAULT_URL,
+                   help=f"pymavlink connection string: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, or a serial "
+                        f"device DEVICE[,BAUD] such as /dev/ttyACM0 or /dev/ttyUSB0,921600 (57600 baud unless given) "
+                        f"(default {DEFAULT_URL})")
     p.add_argument(
-        "--obstacles", action="append", default=[], metavar="URL",
+        "--obstacles", action="append", type=connection_string, default=[], metavar="URL",
         help="receive-only obstacle link (pymavlink connection string, e.g. udpin:0.0.0.0:14601); repeatable; "
         "added to the scenario's [traffic] obstacle_links",
     )
-    p.add_argument("--scenario", help="scenario TOML (mission, planner, estimator, map); required unless --identify")
+    p.add_argument("--scenario", type=scenario_file,
+                   help="scenario TOML (mission, planner, estimator, map) or a shipped scenario's name; required unless --identify")
+    p.add_argument("--goal", type=goal_spec, default=None, metavar="FRAME:A,B,C",
+                   help="where to fly instead of the scenario's [mission] goal: ned:N,E,D (local NED m), home:N,E,U "
+                        "(m from home), geo:LAT,LON,ALTamsl or geo:LAT,LON,ALTrel (degrees; altitude AMSL or above "
+                        "home); placed through the vehicle's GPS_GLOBAL_ORIGIN / HOME_POSITION before arming")
+    p.add_argument("--mission", type=mission_source, default=None, metavar="FILE|vehicle",
+                   help="fly a mission's waypoints instead of one goal: a QGroundControl .plan or QGC WPL 110 file "
+                        "(uploaded to the vehicle first), or 'vehicle' (the mission stored on it, downloaded); "
+                        "docs/MISSIONS.md")
+    p.add_argument("--fence", type=fence_file, default=None, metavar="FILE|vehicle",
+                   help="keep inside a geofence: a QGroundControl .plan file's, or 'vehicle' (the fence stored on "
+                        "the autopilot, downloaded); its inclusion and exclusion polygons and circles, placed through "
+                        "the vehicle's origin (default: the scenario's [mission] fence_file, or the mission file's own fence)")
     p.add_argument("--identify", action="store_true",
                    help="instead of a mission, fly the identification velocity steps (about 75 s, 45 m north) in "
-                        "OFFBOARD, switch to Hold and record --tlog for `companion identify`")
+                        "OFFBOARD (PX4) or GUIDED (ArduCopter), hand back to Hold or LOITER and record --tlog for "
+                        "`companion identify`")
+    p.add_argument("--target-system", type=integer_at_least(1), default=None, metavar="N",
+                   help="MAVLink system id of the only vehicle to command (default: the scenario's [offboard] "
+                        "target_system, else the first autopilot heard; --arm refuses when several are heard)")
+    p.add_argument("--autopilot", choices=("auto", "px4", "ardupilot"), default=None,
+                   help="the kind of autopilot to fly: px4 (OFFBOARD), ardupilot (ArduCopter, GUIDED), or auto: "
+                        "whichever the HEARTBEAT announces (default: the scenario's [offboard] autopilot, else auto)")
     p.add_argument("--arm", action="store_true", help="arm the vehicle if it is disarmed")
     p.add_argument("--takeoff-alt", type=positive_number, default=None, metavar="M", help="take off to M metres above home first")
-    p.add_argument("--reengage", action="store_true", help="re-request OFFBOARD after the pilot took over (default: never)")
-    p.add_argument("--formulation", default=None, help="planner formulation (overrides the scenario)")
+    p.add_argument("--reengage", action="store_true", help="re-request OFFBOARD after the pilot took over, and take over a vehicle found armed in "
+                        "a failsafe at start, as after a restart (default: never)")
+    p.add_argument("--formulation", default=None, choices=FORMULATIONS, help="planner formulation (overrides the scenario)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--tlog", type=output_file, default=None, help="record the link to this tlog")
-    p.add_argument("--duration", type=positive_seconds, default=None, metavar="S", help="stop after S wall seconds")
+    p.add_argument("--duration", type=positive_seconds, default=None, metavar="S",
+                   help="stop after S wall seconds (handing the vehicle back first, as on Ctrl-C)")
+    p.add_argument("--hand-back-timeout", type=non_negative_seconds, default=5.0, metavar="S",
+                   help="on a stop, wait at most S seconds for the HEARTBEAT to show Hold (default 5)")
+    p.add_argument("--linger", type=non_negative_seconds, default=3.0, metavar="S",
+                   help="after the pilot took over, keep recording S seconds, then exit (default 3)")
     p.add_argument("--exit-after-goal", type=non_negative_seconds, default=None, metavar="S",
                    help="S seconds after the goal is reached, switch the vehicle to Hold (AUTO.LOITER) and stop "
                         "once the HEARTBEAT shows it holding")
@@ -66,6 +108,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="keep the setpoint stream in the ordinary scheduling class (default: SCHED_FIFO "
                         f"priority {STREAM_FIFO_PRIORITY} where permitted, as well as nice -10)")
     p.add_argument("--json", action="store_true", help="print the run report as JSON")
+    add_view_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -82,59 +125,73 @@ def run(args: argparse.Namespace) -> int:
         return fly_identification(args)
     if not args.scenario:
         raise ConfigError("--scenario FILE is required (unless --identify)")
-    overrides: dict = {"formulation": args.formulation} if args.formulation else {}
-    if args.no_c_max:
-        overrides["c_max"] = None
-    scenario, _ = load_both(args.scenario, **overrides)  # mavsim's sections too: never accept what mavsim rejects
-    offboard = dataclasses.replace(
-        scenario.offboard,
-        arm=args.arm or scenario.offboard.arm,
-        takeoff_alt_m=scenario.offboard.takeoff_alt_m if args.takeoff_alt is None else args.takeoff_alt,
-        reengage=args.reengage or scenario.offboard.reengage,
-        hold_after_goal_s=args.exit_after_goal,
-    )
+    # imported here, not with the parser: numpy, scipy, filterpy, osqp, numba and pymavlink
+    from companion.core import jit
+    from companion.loop.app import Companion
+    from companion.realtime.stream import PlanWorker, run_realtime
+    from companion.realtime.run_end import RunEnd, RunEndConfig
+    from companion.loop.intake.traffic_config import obstacle_link_name
+    from companion.mavlink import messages
+    from companion.mavlink.link import open_link
+    from companion.mavlink.signing import SigningKeyError, load_signing_key
+    from companion.mavlink.tlog import TlogWriter
+    from companion.offline.report import companion_report, format_report
+    from companion.offline.scenario_file import load_both
+
+    scenario, _ = load_both(args.scenario, **planner_overrides(args))  # mavsim's sections too: never accept what mavsim rejects
+    offboard = offboard_settings(scenario.offboard, args)
     try:
         signing_key = load_signing_key(args.signing_key_file, args.signing_key_env)
     except SigningKeyError as exc:
         raise ConfigError(str(exc)) from None
-    worker = PlanWorker(scenario.planner)  # a planning process beside the setpoint stream
-    if not worker.wait_ready(_PLANNER_START_S):
-        worker.close()
-        raise CompanionError(f"the planning process did not start within {_PLANNER_START_S:.0f} s")
-    companion = Companion(scenario, offboard=offboard, planning=worker)
-
-    def stop(c: Companion) -> bool:
-        """Once the vehicle holds after --exit-after-goal (the sequencer hands it back), or on giving up."""
-        return c.sequencer.phase.name in ("HELD", "GAVE_UP")
-
     stats = None
     with contextlib.ExitStack() as resources:  # each closed once, in reverse order, however the run ends
-        resources.callback(worker.close)
         tlog = TlogWriter(args.tlog) if args.tlog else None  # the stream writes it, in handling order
         if tlog is not None:
             resources.callback(tlog.close)
         link = open_link(args.connect, clock=microsecond_clock, signing_key=signing_key)
         resources.callback(link.close)
+        # Say we are here at once (a peer that waits for a companion's HEARTBEAT hears it now); the
+        # stream's own 1 Hz HEARTBEATs follow from its first tick, once the planner is up.
+        link.send(messages.companion_heartbeat(), t_s=microsecond_clock())
+        # The compiled kernels, loaded (or compiled) before the planning process is forked: it
+        # inherits them and is ready at once, instead of both processes loading them side by side.
+        jit.warm_up()
+        worker = PlanWorker(scenario.planner)  # a planning process beside the setpoint stream
+        resources.callback(worker.close)
+        if not worker.wait_ready(_PLANNER_START_S):
+            raise CompanionError(f"the planning process did not start within {_PLANNER_START_S:.0f} s")
+        companion = Companion(scenario, offboard=offboard, planning=worker, **goal_keywords(args, scenario))
+        run_end = RunEnd(RunEndConfig(duration_s=args.duration, hand_back_timeout_s=args.hand_back_timeout,
+                                      linger_s=args.linger))
         # receive-only obstacle links: their traffic goes into the same tlog, written by the stream
         obstacle_links = []
         for i, url in enumerate((*scenario.traffic.obstacle_links, *args.obstacles)):
             obstacle_links.append(open_link(url, clock=microsecond_clock, signing_key=signing_key,
                                             name=obstacle_link_name(i), receive_only=True))
             resources.callback(obstacle_links[-1].close)
+        # the view's thread and server started before the stream's priority is raised: they keep the normal one
+        view = open_view(args, threaded=True)
+        if view is not None:
+            resources.callback(view.close)
         # the stream's priority for the stream only; the planning process, started above, keeps its own
         stream_nice, stream_fifo = resources.enter_context(
             stream_priority(fifo_priority=None if args.no_realtime_priority else STREAM_FIFO_PRIORITY))
         started = microsecond_clock()
-        try:
-            stats = run_realtime(companion, link, duration_s=args.duration, stop=stop, clock=microsecond_clock,
-                                 tlog=tlog, obstacle_links=obstacle_links)
-        except KeyboardInterrupt:
-            pass
-    report = companion_report(companion)
-    for key in ("events", "failsafe_events"):  # seconds since the start of this run, not epoch
+        with _stop_on_signals(run_end):
+            stats = run_realtime(companion, link, stop=_saying_what_it_waits_for(run_end, args.connect, started),
+                                 clock=microsecond_clock, tlog=tlog, obstacle_links=obstacle_links, after_tick=view)
+    outcome = run_end.outcome(companion)
+    if companion.goal_error is not None:
+        print(f"companion fly: {companion.goal_error}", file=sys.stderr)
+    report = {"outcome": outcome.text, "exit_code": outcome.code, "stop_requested_by": run_end.stop_reason,
+              **companion_report(companion)}
+    for key in ("events", "alerts"):  # seconds since the start of this run, not epoch
         report[key] = [(round(t - started, 2), text) for t, text in report[key]]
     if report.get("goal_reached_companion_t_s") is not None:
         report["goal_reached_companion_t_s"] = round(report["goal_reached_companion_t_s"] - started, 2)
+    if "mission_items_reached_t_s" in report:
+        report["mission_items_reached_t_s"] = [round(t - started, 2) for t in report["mission_items_reached_t_s"]]
     if stats is not None:
         report.update(stats.summary())
         report["wall_s"] = round(stats.wall_s, 2)
@@ -143,6 +200,8 @@ def run(args: argparse.Namespace) -> int:
         "max_solve_ms": round(worker.stats.max_solve_s * 1e3, 1),
         "max_send_ms": round(worker.stats.max_send_s * 1e3, 1), "max_receive_ms": round(worker.stats.max_receive_s * 1e3, 1),
     }
+    if view is not None:
+        report["view"] = view.summary(stats.wall_s if stats is not None else None)
     report["stream_nice"] = stream_nice
     report["stream_fifo_priority"] = stream_fifo
     report["signing"] = signing_key is not None
@@ -151,4 +210,39 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(report, indent=2, default=str))
     else:
         print(format_report(report), file=sys.stdout)
-    return 0 if companion.sequencer.phase.name != "GAVE_UP" else 1
+    return outcome.code
+
+
+#: How often ``fly`` says it is still waiting for an autopilot (s).
+_WAITING_SAY_S = 5.0
+
+
+def _saying_what_it_waits_for(run_end, url: str, started: float):
+    """``run_end`` as the stream's stop check, saying on stderr every 5 s that no autopilot was heard yet."""
+    said = [started]
+
+    def stop(companion, t_s: float) -> bool:
+        if companion.autopilot is None and t_s - said[0] >= _WAITING_SAY_S:
+            said[0] = t_s
+            print(f"companion fly: no autopilot heard on {url} after {t_s - started:.0f} s "
+                  "(is it sending to this port? Ctrl-C stops)", file=sys.stderr)
+        return run_end(companion, t_s)
+
+    return stop
+
+
+@contextlib.contextmanager
+def _stop_on_signals(run_end):
+    """SIGINT and SIGTERM become stop requests of ``run_end`` (the stream hands back first); restored after."""
+    def request(signum, _frame) -> None:
+        name = signal.Signals(signum).name
+        run_end.request_stop(name)
+        if len(run_end.requests) == 1:
+            print(f"companion fly: {name}: handing the vehicle back (again to stop at once)", file=sys.stderr)
+
+    previous = {sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

@@ -12,17 +12,8 @@ import argparse
 import json
 import logging
 
-import numpy as np
-
 from companion.commands._argtypes import integer_at_least, open_unit_interval
 from companion.errors import InputError
-from companion.core.overlap import (
-    bhattacharyya,
-    confidence_from_overlap,
-    minmax,
-    overlap_from_confidence,
-    touch_radius,
-)
 
 logger = logging.getLogger(__name__)
 
@@ -30,10 +21,11 @@ logger = logging.getLogger(__name__)
 TABLE_CONFIDENCES = (0.05, 0.10, 0.20, 0.30, 0.40, 0.50, 0.60, 0.70, 0.80, 0.8051, 0.90, 0.95, 0.99)
 #: (dim, c) reference rows of docs/METHOD.md section 1.6, marked on the figure.
 REFERENCE_ROWS = ((2, 0.8051), (3, 0.60), (3, 0.30), (3, 0.90), (2, 0.90))
-#: The paper's Bhattacharyya pairs: (label, cov1, cov2, separation axis).
+#: The paper's Bhattacharyya pairs: (label, cov1, cov2, separation axis); the covariances as
+#: nested tuples (numpy is imported when the table is printed, not with the parser).
 BHATTACHARYYA_PAIRS = (
-    ("S1=diag(0.01,0.02) S2=diag(0.03,0.03), along x", np.diag([0.01, 0.02]), np.diag([0.03, 0.03]), 0),
-    ("S1=[[0.04,0],[0,0.02]] S2=[[0.02,0.01],[0.01,0.02]], along y", np.array([[0.04, 0.0], [0.0, 0.02]]), np.array([[0.02, 0.01], [0.01, 0.02]]), 1),
+    ("S1=diag(0.01,0.02) S2=diag(0.03,0.03), along x", ((0.01, 0.0), (0.0, 0.02)), ((0.03, 0.0), (0.0, 0.03)), 0),
+    ("S1=[[0.04,0],[0,0.02]] S2=[[0.02,0.01],[0.01,0.02]], along y", ((0.04, 0.0), (0.0, 0.02)), ((0.02, 0.01), (0.01, 0.02)), 1),
 )
 
 
@@ -54,6 +46,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_overlap(args: argparse.Namespace) -> int:
     """Print touch radius, overlap and contour of touch for one ``--confidence`` or ``--overlap``."""
+    from companion.core.overlap import confidence_from_overlap, overlap_from_confidence, touch_radius
+
     if args.confidence is not None:
         c = args.confidence
     else:
@@ -75,9 +69,14 @@ def bhattacharyya_demo(confidence: float = 0.8051) -> list[dict[str, float | str
     ``eta`` is linear in the mean separation, so the separation is the touch radius over
     ``eta`` at unit separation.
     """
+    import numpy as np
+
+    from companion.core.overlap import bhattacharyya, minmax, touch_radius
+
     r = float(touch_radius(confidence, 2))
     rows: list[dict[str, float | str]] = []
     for label, cov1, cov2, axis in BHATTACHARYYA_PAIRS:
+        cov1, cov2 = np.array(cov1), np.array(cov2)
         unit = np.eye(2)[axis]
         separation = r / float(minmax(np.zeros(2), cov1, unit, cov2).eta)
         mu2 = unit * separation
@@ -96,6 +95,8 @@ def bhattacharyya_demo(confidence: float = 0.8051) -> list[dict[str, float | str
 
 def run_table(args: argparse.Namespace) -> int:
     """Print the overlap table for 2-D and 3-D and the Bhattacharyya demonstration; plot if asked."""
+    from companion.core.overlap import overlap_from_confidence, touch_radius
+
     print("Overlap of two Gaussians touching at confidence contour c")
     print(f"{'c':>8}  {'r (2-D)':>8}  {'Y (2-D)':>8}  {'r (3-D)':>8}  {'Y (3-D)':>8}")
     for c in TABLE_CONFIDENCES:

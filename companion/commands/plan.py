@@ -15,19 +15,23 @@ import argparse
 import json
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+from companion.commands._argtypes import scenario_file
+from companion.commands._defaults import FORMULATIONS
+from companion.commands._help import PlainRawDescriptionHelpFormatter
 
-from companion.core.planner import FORMULATIONS, Plan, Planner, PlanRequest
-from companion.offline.scenario_file import load_both, scripted_obstacles
+if TYPE_CHECKING:
+    from companion.core.planner import Plan, Planner, PlanRequest
 
 logger = logging.getLogger(__name__)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("plan", help="one trajectory optimisation on a scenario file (obstacle motion known)",
-                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("scenario", help="scenario TOML file, e.g. configs/single_obstacle.toml")
+                              description=__doc__, formatter_class=PlainRawDescriptionHelpFormatter)
+    p.add_argument("scenario", type=scenario_file,
+                   help="scenario TOML file or a shipped scenario's name, e.g. single_obstacle")
     p.add_argument("--formulation", choices=FORMULATIONS, help="override [planner] formulation")
     p.add_argument("--json", action="store_true", help="print the plan as one JSON object")
     p.add_argument("--plot", metavar="FILE.png", help="draw the paper's figure (paths, contour of touch, goal distance)")
@@ -39,6 +43,11 @@ def build_request(path: str | Path, formulation: str | None = None) -> tuple[Pla
 
     Scripted obstacles move by mavsim's own model (:func:`companion.offline.scenario_file.scripted_obstacles`).
     """
+    import numpy as np
+
+    from companion.core.planner import Planner, PlanRequest
+    from companion.offline.scenario_file import load_both, scripted_obstacles
+
     overrides = {"formulation": formulation} if formulation else {}
     scenario, sim = load_both(path, **overrides)
     cfg = scenario.planner
@@ -94,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(plan_to_json(planner, req, plan, info["names"])))
     else:
+        import numpy as np
+
         err = float(np.linalg.norm(plan.positions[-1] - req.target))
         print(f"{info['scenario']}: {plan.formulation} {plan.status} after {plan.iterations} SCP iterations "
               f"in {plan.solve_time_s * 1e3:.1f} ms; final distance to goal {err:.3f} m; "

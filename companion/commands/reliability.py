@@ -16,8 +16,6 @@ import argparse
 import logging
 
 from companion.errors import ConfigError
-from companion.offline.campaign import METHODS, summarise
-from companion.offline.campaign.store import read_results_file
 
 logger = logging.getLogger(__name__)
 
@@ -37,6 +35,9 @@ def _fmt(x: float | None, spec: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Summarise every file, print the table, draw the figures if asked."""
+    from companion.offline.campaign import METHODS, summarise
+    from companion.offline.campaign.store import read_results_file
+
     campaigns: dict[float, dict] = {}
     described: set[tuple] = set()
     for path in args.results:

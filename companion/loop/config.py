@@ -26,13 +26,21 @@ from companion import validation as check
 from companion.errors import ConfigError
 from companion.mavlink.offboard import OffboardConfig
 from companion.core.planner.config import PlannerConfig
-from companion.loop.traffic_config import TrafficConfig, traffic_from_toml
+from companion.loop.goal_frames import GoalSpec
+from companion.loop.mission_file import read_mission_file
+from companion.loop.intake.traffic_config import TrafficConfig, traffic_from_toml
 from estimator import DroneFilterConfig, EstimatorConfigError, TrackerConfig
 
 logger = logging.getLogger(__name__)
 
 #: Largest scenario file read (bytes): the shipped ones are a few kB.
 MAX_SCENARIO_BYTES = 1 << 20
+#: How far below the local origin (NED ``z > 0``: the origin is where the autopilot's
+#: estimate started, on the ground at home) a goal may lie, metres: a goal lower than
+#: this is under the ground there, and the vehicle would fly into it. The half metre
+#: allows for uneven ground and a goal given on the ground; a mission that must end
+#: below its home's ground is not supported.
+GOAL_BELOW_ORIGIN_MAX_M = 0.5
 #: Largest number of ``[[map.walls]]`` and ``[[map.static_obstacles]]``.
 MAX_WALLS = 64
 MAX_STATIC_OBSTACLES = 256
@@ -45,6 +53,7 @@ SIMULATOR_KEYS: dict[str, frozenset[str]] = {
     "sim": frozenset({
         "vehicle", "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2",
         "position_noise_correlation_s", "velocity_noise_cov_m2ps2", "velocity_bias_mps", "velocity_bias_period_s",
+        "estimator_resets",
         "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
         "home_lat_deg", "home_lon_deg", "home_alt_m", "geoid_separation_m", "arming_delay_s", "offboard_reject_ack",
         "params", "stream_rates_hz",
@@ -106,26 +115,70 @@ class StaticObstacle:
 
 @dataclass(frozen=True)
 class MissionConfig:
-    """Where to go (``[mission]``): the goal (NED, m), when it counts as reached, and waypoint spacing (m).
+    """Where to go (``[mission]``): the goal, when it counts as reached, and waypoint spacing (m).
+
+    The goal is given in exactly one frame (:mod:`companion.loop.goal_frames`):
+    ``goal_ned_m`` (local NED, m), ``goal_home_m`` (north, east, up metres from home) or
+    ``goal_geo`` (latitude, longitude degrees, altitude m; ``goal_geo_altitude`` says
+    whether that is AMSL or relative to home). A goal in the local frame may not lie more
+    than :data:`GOAL_BELOW_ORIGIN_MAX_M` below the local origin (``z <= 0.5``; NED, z down);
+    the others are checked the same way once placed. ``goal_wait_s`` is how long a goal
+    that needs the vehicle's origin or home waits for them before the run gives up.
+    ``fence_file``: a ``.plan`` whose geofence the planner keeps the drone in
+    (:mod:`companion.loop.fence_source`; default: the ``plan_file``'s own fence, if it has one).
 
     ``goal_tolerance_m`` has no default: mavsim reads the same key for its truth
     (time to goal), so the scenario file is its one source.
     """
 
-    goal_ned_m: np.ndarray
+    goal_ned_m: np.ndarray | None
     goal_tolerance_m: float
     waypoint_spacing_m: float = 6.0
+    goal_home_m: np.ndarray | None = None
+    goal_geo: np.ndarray | None = None
+    goal_geo_altitude: str = "amsl"
+    goal_wait_s: float = 30.0
+    plan_file: str | None = None
+    plan_upload: bool = True
+    fence_file: str | None = None
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
-        set_("goal_ned_m", check.vector3("goal_ned_m", self.goal_ned_m))
+        given = [k for k in ("goal_ned_m", "goal_home_m", "goal_geo", "plan_file") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ConfigError("exactly one of goal_ned_m, goal_home_m, goal_geo, plan_file is required"
+                              + (f" (given: {', '.join(given)})" if given else ""))
+        set_("plan_upload", check.boolean("plan_upload", self.plan_upload))
+        if self.plan_file is not None:
+            set_("plan_file", check.text("plan_file", self.plan_file, max_len=4096))
+        if self.fence_file is not None:
+            set_("fence_file", check.text("fence_file", self.fence_file, max_len=4096))
+        for key in (k for k in given if k != "plan_file"):
+            set_(key, check.vector3(key, getattr(self, key)))
+        if self.goal_ned_m is not None and self.goal_ned_m[2] > GOAL_BELOW_ORIGIN_MAX_M:
+            raise ConfigError(f"goal_ned_m = {self.goal_ned_m.tolist()!r} is {self.goal_ned_m[2]:g} m below the local "
+                              f"origin (NED: z is down, so z > 0 is under the ground at home); z must be at most "
+                              f"{GOAL_BELOW_ORIGIN_MAX_M:g} (e.g. -5 for 5 m up)")
+        set_("goal_geo_altitude", check.choice("goal_geo_altitude", self.goal_geo_altitude, ("amsl", "rel")))
         set_("goal_tolerance_m", check.number("goal_tolerance_m", self.goal_tolerance_m, positive=True, hi=1000.0))
         set_("waypoint_spacing_m", check.number("waypoint_spacing_m", self.waypoint_spacing_m, positive=True, hi=1e4))
+        set_("goal_wait_s", check.number("goal_wait_s", self.goal_wait_s, positive=True, hi=3600.0))
+        if self.plan_file is None:
+            self.goal_spec  # the frame's own checks (latitude range, distance)
 
     @property
-    def goal(self) -> np.ndarray:
-        """The goal position (NED, m)."""
+    def goal(self) -> np.ndarray | None:
+        """The goal position in the local frame (NED, m) when given there, else None (placed in flight)."""
         return self.goal_ned_m
+
+    @property
+    def goal_spec(self) -> GoalSpec:
+        """The goal as given, in its frame (not for a ``plan_file`` mission)."""
+        if self.goal_ned_m is not None:
+            return GoalSpec("ned", tuple(self.goal_ned_m))
+        if self.goal_home_m is not None:
+            return GoalSpec("home", tuple(self.goal_home_m))
+        return GoalSpec("geo", tuple(self.goal_geo), self.goal_geo_altitude)
 
 
 @dataclass(frozen=True)
@@ -226,7 +279,7 @@ class CompanionScenario:
     planner: PlannerConfig
     drone_filter: DroneFilterConfig
     tracker: TrackerConfig
-    loop: LoopConfig
+    companion: LoopConfig  # the [companion] table
     offboard: OffboardConfig = field(default_factory=OffboardConfig)
     walls: tuple[Wall, ...] = field(default_factory=tuple)
     static_obstacles: tuple[StaticObstacle, ...] = field(default_factory=tuple)
@@ -335,9 +388,21 @@ def scenario_from_dict(data: Mapping[str, Any], path: str | Path = "<dict>", **p
         raise ConfigError(f"{path} [vehicle]: {exc}") from None
 
     mission_t = _section(data, "mission", where)
-    for required in ("goal_ned_m", "goal_tolerance_m"):
-        if required not in mission_t:
-            raise ConfigError(f"{path} [mission]: {required} is required")
+    if "goal_tolerance_m" not in mission_t:
+        raise ConfigError(f"{path} [mission]: goal_tolerance_m is required")
+    if not any(k in mission_t for k in ("goal_ned_m", "goal_home_m", "goal_geo", "plan_file")):
+        raise ConfigError(f"{path} [mission]: goal_ned_m is required (or goal_home_m, goal_geo, plan_file)")
+    mission_t = {"goal_ned_m": None, **mission_t}
+    for key in ("plan_file", "fence_file"):
+        if isinstance(mission_t.get(key), str) and not (key == "fence_file" and mission_t[key] == "vehicle"):
+            # relative to the scenario file, and read now: errors at load
+            plan = Path(mission_t[key]).expanduser()
+            if not plan.is_absolute() and path.parent.is_dir() and not str(path).startswith("<"):
+                plan = path.parent / plan
+            mission_t[key] = str(plan)
+            read = read_mission_file(plan, fence_only=key == "fence_file")
+            if key == "fence_file" and not read.polygons and not read.circles:
+                raise ConfigError(f"{path} [mission]: fence_file {plan}: no geofence in it (geoFence polygons or circles)")
     mission = check.build_section(MissionConfig, mission_t, f"{path} [mission]")
 
     overrides = {"drone_radius_m": drone_radius, **planner_overrides}
@@ -362,7 +427,7 @@ def scenario_from_dict(data: Mapping[str, Any], path: str | Path = "<dict>", **p
     walls, statics = _map(data, path)
     return CompanionScenario(
         path=path, name=name, description=description, duration_s=duration_s, drone_radius_m=drone_radius,
-        mission=mission, planner=planner, drone_filter=drone_filter, tracker=tracker, loop=loop,
+        mission=mission, planner=planner, drone_filter=drone_filter, tracker=tracker, companion=loop,
         offboard=offboard, walls=walls, static_obstacles=statics,
         traffic=traffic_from_toml(_section(data, "traffic", where), f"{path} [traffic]"),
     )

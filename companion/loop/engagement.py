@@ -10,7 +10,8 @@ from __future__ import annotations
 from typing import Protocol
 
 from companion.mavlink.messages import CommandAck, Key, VehicleHeartbeat
-from companion.mavlink.offboard import Action, Phase, SequencerState
+from companion.mavlink.autopilots import Autopilot
+from companion.mavlink.offboard import Action, OffboardConfig, Phase, SequencerState
 
 
 class OffboardSequence(Protocol):
@@ -37,11 +38,32 @@ class OffboardSequence(Protocol):
     def on_statustext(self, t_s: float, text: str) -> None:
         """The autopilot's STATUSTEXTs."""
 
+    @property
+    def kind(self) -> Autopilot | None:
+        """The followed autopilot's kind, once heard."""
+
+    @property
+    def config(self) -> OffboardConfig:
+        """The engagement settings."""
+
     def on_home_altitude(self, alt_amsl_m: float) -> None:
         """The autopilot's home altitude, metres AMSL (HOME_POSITION)."""
 
+    def on_home_local_z(self, local_z_m: float) -> None:
+        """Home's down coordinate in the autopilot's local frame, m (HOME_POSITION ``z``)."""
+
+    def on_estimator_status(self, t_s: float, flags: int) -> None:
+        """The autopilot's estimator status (EKF_STATUS_REPORT flags): whether it can fly."""
+
+    def on_vehicle_position(self, t_s: float, z_ned_m: float, vz_ned_mps: float | None) -> None:
+        """The autopilot's own down position (m) and velocity (m/s) estimate."""
+
     def on_goal_reached(self, t_s: float) -> None:
         """The companion reached its goal at link time ``t_s`` (the sequencer may hand back to Hold)."""
+
+    def hand_back(self, t_s: float, reason: str) -> bool:
+        """Ask for Hold at link time ``t_s``, streaming until the vehicle shows it; whether it started
+        (False when nothing of ours was streaming)."""
 
     def step(self, t_s: float) -> list[Action]:
         """Advance to link time ``t_s``; the commands to send and the events to report."""

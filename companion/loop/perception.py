@@ -23,6 +23,12 @@ from estimator import DroneFilter, ObstacleTracker, PositionDrift, Reason
 
 logger = logging.getLogger(__name__)
 
+#: A LOCAL_POSITION_NED (no reset counter) this far (m) from the drone filter's prediction, less
+#: than :data:`JUMP_WITHIN_S` after the previous report, is the autopilot's estimator reset: no
+#: multicopter moves a metre between two reports at 30 Hz or more.
+LOCAL_POSITION_JUMP_M = 1.0
+JUMP_WITHIN_S = 0.5
+
 
 class PoseOutcome(enum.Enum):
     """What became of one pose observation."""
@@ -45,7 +51,7 @@ class Perception:
 
     def __init__(self, scenario: CompanionScenario) -> None:
         self.drone = DroneFilter(scenario.drone_filter)
-        window = scenario.loop.drift_window_s
+        window = scenario.companion.drift_window_s
         #: The drift of the autopilot's position estimate against its velocity, when asked for.
         self.drift = PositionDrift(window) if window > 0.0 else None
         self.tracker = ObstacleTracker(scenario.tracker)
@@ -53,11 +59,15 @@ class Perception:
         self.clock = VehicleClock()
         self._uses_odometry = False
         self._ignored_keys: set[Key] = set()
+        self._reset_counter: int | None = None
+        #: The autopilot's estimator resets seen: (vehicle time s of the first report after it,
+        #: the jump of the reported position, NED m). Its length is the reset epoch.
+        self.resets: list[tuple[float, np.ndarray]] = []
         #: The autopilot's own position covariance from ODOMETRY (m^2, NED), if it reports one.
         self.reported_cov: np.ndarray | None = None
         #: The response model's internal state, observed (``[companion] response_state = "observed"``).
         self.response: ResponseObserver | None = None
-        if scenario.loop.response_state == "observed":
+        if scenario.companion.response_state == "observed":
             planner = scenario.planner
             self.response = ResponseObserver(ResponseModel(planner.step_s, *planner.vehicle_response))
 
@@ -75,6 +85,7 @@ class Perception:
                 self._uses_odometry = True
             elif self._uses_odometry:
                 return PoseOutcome.IGNORED
+            self._reset_if_jumped(obs)
             result = self.drone.update(obs.t_s, obs.position_ned, obs.velocity_ned, obs.position_var, obs.velocity_var)
             if not result.accepted:
                 return PoseOutcome.DRONE_REJECTED
@@ -96,6 +107,85 @@ class Perception:
             return PoseOutcome.IGNORED
         result = self.tracker.update(obs.key, obs.t_s, obs.position_ned, obs.velocity_ned, obs.position_cov, obs.velocity_cov)
         return PoseOutcome.OBSTACLE if result.accepted else PoseOutcome.OBSTACLE_REJECTED
+
+    @property
+    def reset_epoch(self) -> int:
+        """How many estimator resets of the autopilot have been seen (plans of an older epoch are stale)."""
+        return len(self.resets)
+
+    def _reset_if_jumped(self, obs: PoseObservation) -> None:
+        """Forget the drone estimate when the autopilot's estimator reset: ODOMETRY's ``reset_counter``
+        changed, or (LOCAL_POSITION_NED) the position jumped :data:`LOCAL_POSITION_JUMP_M` from the
+        prediction. Reports either side of a reset are a jump apart: blended, they would make a
+        position between the two and a velocity out of the jump."""
+        counter, previous = obs.reset_counter, self._reset_counter
+        if counter is not None:
+            self._reset_counter = counter
+        state = self.drone.state
+        if state is None:
+            return
+        predicted = state.position + state.velocity * max(0.0, obs.t_s - state.t_s)
+        jump = np.asarray(obs.position_ned, dtype=float) - predicted
+        if counter is not None and previous is not None:
+            if counter == previous:
+                return
+        elif obs.source == "ODOMETRY" or not (0.0 <= obs.t_s - state.t_s <= JUMP_WITHIN_S
+                                             and float(np.linalg.norm(jump)) > LOCAL_POSITION_JUMP_M):
+            return
+        logger.warning("autopilot estimator reset at t=%.3f s (%s): position jumped %s m; estimate restarted",
+                       obs.t_s, f"reset_counter {previous} -> {counter}" if counter is not None else "LOCAL_POSITION_NED jump",
+                       np.round(jump, 2).tolist())
+        self.resets.append((float(obs.t_s), jump))
+        self.drone.reset()
+        if self.drift is not None:
+            self.drift.clear()
+        if self.response is not None:
+            self.response.reset()
+
+    # ------------------------------------------------------------------ the plans' frame
+
+    def plan_velocity(self) -> np.ndarray:
+        """The drone's velocity in the plans' frame (NED m/s): the estimate's position rate, that
+        is the velocity estimate plus the drift (see ``[companion] drift_window_s``)."""
+        velocity = self.drone.state.velocity
+        return velocity + self.drift_mps() if self.drift is not None else velocity
+
+    def autopilot_command(self, command: np.ndarray) -> np.ndarray:
+        """A velocity of the plans' frame as the autopilot's velocity loop must get it (NED m/s):
+        less the estimate's drift (the inverse of :meth:`plan_velocity`)."""
+        return command - self.drift_mps() if self.drift is not None else command
+
+    def response_state(self, t_v: float) -> np.ndarray | None:
+        """The response model's internal state at vehicle time ``t_v`` for a plan's start (None
+        unless ``[companion] response_state = "observed"``).
+
+        The observer's state is the autopilot's, which holds its velocity; the plan's model runs
+        on velocity + drift, so its state also holds the drift's drag (else the model would brake
+        the drift away: k d, 0.4 m/s^2 for 0.5 m/s east on PX4 SITL).
+        """
+        if self.response is None:
+            return None
+        state = self.response.internal(t_v)
+        if state is not None and self.drift is not None:
+            state = state + self.response.model.steady_internal(self.drift_mps())
+        return state
+
+    def setpoint_sent(self, t_s: float, engaged: bool, command: np.ndarray) -> None:
+        """The velocity setpoint just sent at link time ``t_s`` (autopilot frame), for the response
+        observer: while engaged its velocity loop follows our setpoints; before, it is the
+        autopilot's own, so the observer starts afresh from the first report after."""
+        if self.response is None:
+            return
+        t_v = self.vehicle_time(t_s)
+        if not engaged or t_v is None:
+            self.response.reset()
+            return
+        self.response.command(t_v, command)
+
+    def released(self) -> None:
+        """No setpoint of ours is in force (not streaming): the response observer starts afresh."""
+        if self.response is not None:
+            self.response.reset()
 
     def drift_mps(self) -> np.ndarray:
         """How fast the autopilot's position estimate moves against its velocity estimate (m/s NED;

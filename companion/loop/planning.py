@@ -6,7 +6,7 @@ planner can take it at once, so it starts from the freshest state and none is bu
 thrown away), and collects :class:`PlanResult` s at every tick. :class:`InlinePlanning` solves at
 submission, so the plan is applied at the tick that asked for it: lockstep runs and
 replays use it and are deterministic. The real-time edge passes a worker that solves
-beside the setpoint stream (:class:`companion.loop.realtime.PlanWorker`); the loop itself
+beside the setpoint stream (:class:`companion.realtime.stream.PlanWorker`); the loop itself
 never waits for a plan and owns no thread.
 """
 
@@ -35,9 +35,9 @@ class PlanningService(Protocol):
 
     planner: Planner  #: the planner that solves; the loop reads only its vehicle model (``planner.lag``)
     #: False: every plan comes back in the tick that asked for it (lockstep), and arrivals go
-    #: unannounced. True: a plan comes back at whatever tick collects it, the asking one
-    #: included, and the loop announces every arrival (:data:`~companion.loop.app.PLAN_ARRIVED`)
-    #: so a replay applies it at the same tick.
+    #: unrecorded. True: a plan comes back at whatever tick collects it, the asking one
+    #: included, and the loop keeps every arrival (:class:`~companion.loop.plan_cycle.PlanArrival`)
+    #: for the edge's tlog marks, so a replay applies it at the same tick.
     asynchronous: bool
 
     @property

@@ -138,6 +138,8 @@ class CompanionState:
     failed_plans: int = 0
     slack_plans: int = 0
     old_plan_events: int = 0
+    estimator_resets: int = 0      #: the autopilot's estimator resets acted on (plan dropped, replanned)
+    plans_before_reset: int = 0    #: plans discarded on arrival: built from an estimate before a reset
     obstacle_rejections: int = 0
     drone_rejections: int = 0
     messages_rejected: int = 0
@@ -147,6 +149,12 @@ class CompanionState:
     #: smallest realised contour of touch over every replan request (also those whose plan
     #: never came back or was superseded in real time); None until an obstacle was in range
     min_realised_contour: float | None = None
+    #: smallest distance between the drone's estimate and any track's, less both radii (m), over
+    #: every replan request; None until a track was heard
+    min_track_clearance_m: float | None = None
+    #: smallest signed distance (m) from the drone's estimate to the geofence over every replan
+    #: request (negative: outside it); None without a fence
+    min_fence_clearance_m: float | None = None
     #: largest drift of the autopilot's position estimate against its velocity per NED axis at a
     #: replan request, m/s (``[companion] drift_window_s``; zeros when off)
     drift_max_mps: list = field(default_factory=lambda: [0.0, 0.0, 0.0])

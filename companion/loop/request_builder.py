@@ -1,8 +1,10 @@
-"""From estimates, mission and map to one planning problem (:class:`ReplanJob`).
+"""From estimates, the goal, the obstacle sources and the map to one planning problem (:class:`ReplanJob`).
 
-Covariance policy for the drone, obstacle prediction over the horizon, the static map,
-waypoint routing along the straight route and the choice of the obstacle the ``c_max``
-upper bound follows. The job also carries what the loop records about the request (the
+Covariance policy for the drone, the tracks' prediction over the horizon (the most
+threatening tracks constrained, the rest left out or set apart beyond walls), the other
+obstacle sources (:mod:`companion.loop.obstacle_sources`), the goal source's target
+(:mod:`companion.loop.goal`) and the choice of the obstacles the ``c_max`` upper bound
+follows. The job also carries what the loop records about the request (the
 estimates it was built from, the realised contour of touch), so a plan that comes back
 later (real time) is recorded against the state it was planned from.
 """
@@ -10,7 +12,7 @@ later (real time) is recorded against the state it was planned from.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Hashable
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +20,8 @@ import numpy as np
 from companion.core.overlap import contour_of_touch
 from companion.core.planner import Plan, PlanRequest
 from companion.loop.config import CompanionScenario
+from companion.loop.goal import GoalSource, ScenarioGoal, leads_the_way
+from companion.loop.obstacle_sources import ObstacleSource, StaticObstacles
 from companion.loop.perception import Perception
 from companion.loop.track_selection import beyond_walls, choose, confidence_radius, rank_by_risk
 from estimator.models import propagate_position
@@ -78,11 +82,14 @@ class ReplanJob:
     tracks_beyond_walls: tuple = ()
 
 
+#: How far (m, beyond the drone's radius) the way round a fence's zones keeps off their corners.
+FENCE_CORNER_MARGIN_M = 1.0
+
+
 class RequestBuilder:
     """Builds :class:`ReplanJob` s for one scenario (mission, map, planner and loop settings).
 
-    Holds one piece of state: where the route starts (the drone's position when the
-    companion first planned), from which waypoints are placed toward the goal.
+    Holds no state of its own but its sources': the goal source keeps where the route started.
 
     Parameters
     ----------
@@ -90,58 +97,33 @@ class RequestBuilder:
         Mission, map, planner and loop settings.
     obstacle_radius : callable (track key) -> float, optional
         Body radius of a tracked obstacle, m (e.g. from its traffic reports, see
-        :meth:`companion.loop.obstacles.ObstacleIntake.radius`); default: every track
+        :meth:`companion.loop.intake.obstacles.ObstacleIntake.radius`); default: every track
         has ``[companion] obstacle_radius_m``.
+    goal : GoalSource, optional
+        Where the drone is going (default: :class:`~companion.loop.goal.ScenarioGoal`).
+    sources : sequence of ObstacleSource, optional
+        Obstacles besides the tracks (default: the scenario's static obstacles).
+    fence : FenceSource, optional
+        A geofence: its walls about the plan's start join the scenario's walls.
     """
 
     def __init__(self, scenario: CompanionScenario,
-                 obstacle_radius: Callable[[Hashable], float] | None = None) -> None:
+                 obstacle_radius: Callable[[Hashable], float] | None = None, *,
+                 goal: GoalSource | None = None, sources: Sequence[ObstacleSource] | None = None,
+                 fence=None) -> None:
         self.scenario = scenario
         self.cfg = scenario.planner
-        self.loop = scenario.loop
-        default_radius_m = scenario.loop.obstacle_radius_m
+        self.settings = scenario.companion
+        default_radius_m = scenario.companion.obstacle_radius_m
         self.obstacle_radius: Callable[[Hashable], float] = obstacle_radius or (lambda key: default_radius_m)
-        self.route_start: np.ndarray | None = None
+        #: where the drone is going (default: the scenario's ``[mission]`` goal)
+        self.goal: GoalSource = goal if goal is not None else ScenarioGoal(scenario.mission)
+        #: obstacles besides the tracks (default: the scenario's static obstacles)
+        self.sources: tuple[ObstacleSource, ...] = (
+            tuple(sources) if sources is not None else (StaticObstacles(scenario.static_obstacles),))
         self._sigmas = confidence_radius(self.cfg.c_min)
-
-    # ------------------------------------------------------------------ mission
-
-    def start_route(self, position: np.ndarray) -> None:
-        """Fix the route's start at the first call (NED m); later calls do nothing."""
-        if self.route_start is None:
-            self.route_start = np.asarray(position, dtype=float).copy()
-
-    def at_goal(self, position: np.ndarray) -> bool:
-        """Whether ``position`` (NED m) is within the mission's goal tolerance."""
-        mission = self.scenario.mission
-        return bool(np.linalg.norm(position - mission.goal) <= mission.goal_tolerance_m)
-
-    def target(self, position: np.ndarray) -> np.ndarray:
-        """Intermediate waypoint on the straight route from where the companion took over to the goal."""
-        goal = self.scenario.mission.goal
-        start = self.route_start if self.route_start is not None else position
-        route = goal - start
-        length = float(np.linalg.norm(route))
-        if length < 1e-9:
-            return goal.copy()
-        along = float(np.dot(position - start, route) / length)
-        s = min(length, max(0.0, along) + self.scenario.mission.waypoint_spacing_m)
-        return start + route * (s / length)
-
-    def leads_the_way(self, position: np.ndarray, obstacle: np.ndarray) -> bool:
-        """Whether an obstacle is between the drone and its goal along the line to the goal.
-
-        The ``c_max`` upper bound (keep the ``c_max`` contours touching) is meant for
-        following an obstacle that leads the way through a tight space; it is released
-        once that obstacle is behind the drone or past the goal, so the drone stops at
-        its goal instead of being dragged along.
-        """
-        to_goal = self.scenario.mission.goal - position
-        length = float(np.linalg.norm(to_goal))
-        if length < 1e-9:
-            return False
-        along = float(np.dot(obstacle - position, to_goal) / length)
-        return 0.0 < along < length
+        #: the geofence (:class:`~companion.loop.fence_source.FenceSource`): walls about each plan's start
+        self.fence = fence
 
     # ------------------------------------------------------------------ estimates
 
@@ -155,11 +137,11 @@ class RequestBuilder:
         """
         n, tau = self.cfg.horizon_steps, self.cfg.step_s
         est = perception.drone.state
-        if self.loop.drone_covariance == "reported" and perception.reported_cov is not None:
+        if self.settings.drone_covariance == "reported" and perception.reported_cov is not None:
             cov_now = perception.reported_cov
         else:
             cov_now = est.position_cov
-        if self.loop.drone_covariance == "predicted":
+        if self.settings.drone_covariance == "predicted":
             covs = perception.drone.predict_position_covariances(t_v, np.zeros((n, 3)), tau)
         else:
             covs = np.broadcast_to(cov_now, (n, 3, 3)).copy()
@@ -200,10 +182,10 @@ class RequestBuilder:
         times = t0 + tau * np.arange(1, n + 1)
         keys = list(tracker.keys())
         # every track's estimate read once, as arrays (row k for keys[k]), when they are set apart or ranked
-        stack = tracker.stacked(keys) if len(keys) > self.loop.max_constrained_tracks or self.scenario.walls else None
+        stack = tracker.stacked(keys) if len(keys) > self.settings.max_constrained_tracks or self.scenario.walls else None
         row = {k: i for i, k in enumerate(keys)} if stack is not None else {}
         near, beyond = self._split_beyond_walls(keys, stack, perception, t0)
-        margin = self.loop.tracking_margin_m2 * np.eye(3)
+        margin = self.settings.tracking_margin_m2 * np.eye(3)
         constrained, left_out = self._select(near, stack, row, t0, position, initial_velocity, cov_now + margin)
         now_left_out = self._estimates_now(left_out + beyond, stack, row, t_v)
         # every constrained track now (t_v, column 0) and over the horizon, in one pass
@@ -214,12 +196,22 @@ class RequestBuilder:
         now_cov = dict(zip(constrained, predicted_covs[:, 0]))
         for key, (m0, c0) in now_left_out.items():
             now_pos[key], now_cov[key] = m0, c0
-        for s in self.scenario.static_obstacles:
-            means.append(np.broadcast_to(s.center, (n, 3)))
-            covs.append(np.broadcast_to(s.covariance, (n, 3, 3)))
-            radii.append(s.radius)
-        target = self.target(position)
-        leading = [self.leads_the_way(position, now_pos[k]) for k in constrained] + [False] * len(self.scenario.static_obstacles)
+        goal = self.goal.goal
+        leading = [leads_the_way(goal, position, now_pos[k]) for k in constrained]
+        for source in self.sources:  # the obstacles that are not tracks, after the tracks
+            h = source.horizon(times)
+            means.extend(h.means)
+            covs.extend(h.covs)
+            radii.extend(h.radii.tolist())
+            leading.extend(bool(lead) and leads_the_way(goal, position, m[0]) for lead, m in zip(h.may_lead, h.means))
+        target = self.goal.target(position)
+        walls_normal, walls_offset = self.scenario.walls_normal, self.scenario.walls_offset
+        if self.fence is not None:
+            # the way round the fence's zones (the walls alone would hold the drone at a face)
+            target = self.fence.route_target(position, target, self.cfg.drone_radius_m + FENCE_CORNER_MARGIN_M, goal)
+            fence_normal, fence_offset = self.fence.walls(position)
+            walls_normal = np.concatenate([walls_normal, fence_normal])
+            walls_offset = np.concatenate([walls_offset, fence_offset])
         request = PlanRequest(
             position=position,
             velocity=initial_velocity,
@@ -228,10 +220,10 @@ class RequestBuilder:
             obstacle_means=np.array(means).reshape(-1, n, 3),
             obstacle_covs=np.array(covs).reshape(-1, n, 3, 3),
             obstacle_radii=np.array(radii, dtype=float),
-            walls_normal=self.scenario.walls_normal,
-            walls_offset=self.scenario.walls_offset,
+            walls_normal=walls_normal,
+            walls_offset=walls_offset,
             upper_bound_mask=np.array(leading, dtype=bool),
-            margin_cov=margin if self.loop.tracking_margin_m2 > 0.0 else None,
+            margin_cov=margin if self.settings.tracking_margin_m2 > 0.0 else None,
             response_state=response_state,
         )
         return ReplanJob(
@@ -287,7 +279,7 @@ class RequestBuilder:
         estimate in one vectorised step, so 200 tracks cost about as much as a few.
         ``stack`` holds every track's estimate, ``keys[k]``'s in its row ``row[keys[k]]``.
         """
-        limit = self.loop.max_constrained_tracks
+        limit = self.settings.max_constrained_tracks
         if len(keys) <= limit:
             return keys, []
         n, tau = self.cfg.horizon_steps, self.cfg.step_s

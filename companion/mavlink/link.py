@@ -21,7 +21,10 @@ Connection strings (pymavlink's):
   the vehicle has sent something, outbound packets go nowhere (UDP is silent).
 - ``udpout:127.0.0.1:14580``: send to a fixed address.
 - ``tcp:host:port``: connect (pymavlink retries; see ``tcp_retries``).
-- a serial device (``/dev/ttyACM0``, ``/dev/ttyUSB0``, ``COM3``) with ``baud``.
+- a serial device, ``DEVICE`` or ``DEVICE,BAUD`` (pymavlink's form: ``/dev/ttyACM0``,
+  ``/dev/ttyUSB0,921600``, ``COM3``); without a baud rate :data:`DEFAULT_BAUD` (57600).
+  ``serial:DEVICE:BAUD`` is read the same way (:func:`serial_device`). A device path that
+  does not exist is refused, naming it.
 
 Time. A link never decides what time it is: it stamps each received message
 with ``clock()`` at poll time (real links, default ``time.time``) or with the
@@ -52,6 +55,9 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from companion.mavlink.autopilots import DIALECT
+
+from companion.mavlink.connection import DEFAULT_BAUD, NETWORK_PREFIXES as _NETWORK_PREFIXES, serial_device
 from companion.mavlink.signing import enable_signing
 
 from companion.errors import LinkError
@@ -145,7 +151,7 @@ class Link(abc.ABC):
         self.clock = clock
         self.source_system = int(source_system)
         self.source_component = int(source_component)
-        self._mav = mavlink2.MAVLink(None, self.source_system, self.source_component)
+        self._mav = DIALECT.MAVLink(None, self.source_system, self.source_component)
         self._mav.robust_parsing = True
         self.stats = LinkStats()
         self._owns_tlog = tlog is not None and not isinstance(tlog, TlogWriter)
@@ -171,7 +177,7 @@ class Link(abc.ABC):
             raise LinkError(f"MAVLink 2 signing key must be 32 bytes, got {len(key)}")
         enable_signing(self._mav, key, link_id=link_id, now_s=self.clock() + self.tlog_offset_s)
         if accept_unsigned:
-            signing.allow_unsigned_callback = lambda _mav, _msgid: True
+            self._mav.signing.allow_unsigned_callback = lambda _mav, _msgid: True
 
     # ------------------------------------------------------------------ sending
 
@@ -342,9 +348,6 @@ class MemoryLink(Link):
         return f"MemoryLink(source={self.key})"
 
 
-_NETWORK_PREFIXES = ("udpin:", "udpout:", "udp:", "udpbcast:", "tcp:", "tcpin:")
-
-
 class MavutilLink(Link):
     """A real connection opened by ``pymavlink.mavutil.mavlink_connection``.
 
@@ -360,7 +363,7 @@ class MavutilLink(Link):
     clock : callable () -> float
         Receive and send stamps, default ``time.time``.
     baud : int
-        Serial baud rate.
+        Serial baud rate when ``url`` gives none (``DEVICE,BAUD`` gives one).
     tcp_retries : int
         Connection attempts for ``tcp:`` (one second apart, pymavlink's way).
     **kwargs
@@ -377,19 +380,30 @@ class MavutilLink(Link):
         url: str = DEFAULT_URL,
         *,
         clock: Callable[[], float] = time.time,
-        baud: int = 57600,
+        baud: int = DEFAULT_BAUD,
         tcp_retries: int = 3,
         **kwargs,
     ) -> None:
         super().__init__(clock=clock, **kwargs)
         self.url = url
-        if not url.startswith(_NETWORK_PREFIXES) and Path(url).is_file():
-            raise LinkError(f"{url!r} is a file, not a connection; replay logs with companion.mavlink.tlog.read_tlog")
+        target = url
+        try:
+            if not url.startswith(_NETWORK_PREFIXES) and Path(url).is_file():
+                raise LinkError(f"{url!r} is a file, not a connection; replay logs with companion.mavlink.tlog.read_tlog")
+            serial = serial_device(url)
+            if serial is not None:
+                target, baud = serial
+                if Path(target).is_file():
+                    raise LinkError(f"{target!r} is a file, not a serial device")
+        except LinkError:
+            if self.tlog is not None and self._owns_tlog:
+                self.tlog.close()
+            raise
         from pymavlink import mavutil
 
         try:
             self._conn = mavutil.mavlink_connection(
-                url,
+                target,
                 baud=baud,
                 source_system=self.source_system,
                 source_component=self.source_component,

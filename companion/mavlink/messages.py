@@ -124,6 +124,9 @@ class PoseObservation:
         unknown (NaN in element 0, or a message without covariance).
     source : str
         ``'ODOMETRY'`` or ``'LOCAL_POSITION_NED'``.
+    reset_counter : int or None
+        ODOMETRY's ``reset_counter`` (the estimator's count of its resets, PX4's position
+        reset counter); None for a message without one.
     """
 
     key: Key
@@ -133,6 +136,7 @@ class PoseObservation:
     position_cov: np.ndarray | None
     velocity_cov: np.ndarray | None
     source: str
+    reset_counter: int | None = None
 
     @property
     def position_var(self) -> np.ndarray | None:
@@ -176,10 +180,24 @@ class StatusText:
 
 @dataclass(frozen=True)
 class HomePosition:
-    """HOME_POSITION: the sender's home altitude, metres AMSL (the message's ``altitude`` is mm)."""
+    """HOME_POSITION: the sender's home altitude, metres AMSL (the message's ``altitude`` is mm),
+    its latitude and longitude (degrees) and its position in the local frame (NED, m)."""
 
     key: Key
     altitude_amsl_m: float
+    #: home's down coordinate in the sender's local NED frame (m from its EKF origin)
+    local_z_m: float = 0.0
+    lat_deg: float = math.nan
+    lon_deg: float = math.nan
+    local_ned_m: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+
+
+@dataclass(frozen=True)
+class EstimatorStatus:
+    """EKF_STATUS_REPORT: the sender's estimator ``flags`` (EKF_STATUS_FLAGS), which say whether it can fly."""
+
+    key: Key
+    flags: int
 
 
 @dataclass(frozen=True)
@@ -205,7 +223,8 @@ class Rejected:
     reason: str
 
 
-Decoded = Union[VehicleHeartbeat, PoseObservation, CommandAck, StatusText, HomePosition, TimeSync, Rejected]
+Decoded = Union[VehicleHeartbeat, PoseObservation, CommandAck, StatusText, HomePosition, EstimatorStatus, TimeSync,
+                Rejected]
 
 
 # --------------------------------------------------------------------------- decoding
@@ -278,7 +297,15 @@ def decode_timesync(msg: mavlink2.MAVLink_timesync_message) -> TimeSync | Reject
 
 def decode_home_position(msg: mavlink2.MAVLink_home_position_message) -> HomePosition:
     """HOME_POSITION to :class:`HomePosition` (altitude mm AMSL to metres)."""
-    return HomePosition(key=source_key(msg), altitude_amsl_m=msg.altitude / 1000.0)
+    z = float(msg.z)
+    return HomePosition(key=source_key(msg), altitude_amsl_m=msg.altitude / 1000.0, local_z_m=z if math.isfinite(z) else 0.0,
+                        lat_deg=msg.latitude * 1e-7, lon_deg=msg.longitude * 1e-7,
+                        local_ned_m=(float(msg.x), float(msg.y), float(msg.z)))
+
+
+def decode_ekf_status_report(msg) -> EstimatorStatus:
+    """EKF_STATUS_REPORT (193, ArduPilot's dialect) to :class:`EstimatorStatus`."""
+    return EstimatorStatus(key=source_key(msg), flags=int(msg.flags))
 
 
 def covariance_from_upper_triangle(values, *, what: str) -> np.ndarray | None | str:
@@ -392,6 +419,7 @@ def decode_odometry(msg: mavlink2.MAVLink_odometry_message) -> PoseObservation |
         position_cov=pos_cov,
         velocity_cov=vel_cov,
         source="ODOMETRY",
+        reset_counter=int(msg.reset_counter),
     )
 
 
@@ -427,6 +455,7 @@ _DECODERS = {
     "COMMAND_ACK": decode_command_ack,
     "STATUSTEXT": decode_statustext,
     "HOME_POSITION": decode_home_position,
+    "EKF_STATUS_REPORT": decode_ekf_status_report,
     "TIMESYNC": decode_timesync,
 }
 
@@ -589,6 +618,12 @@ def command_long(
 def request_message_command(message_id: int, **target) -> mavlink2.MAVLink_command_long_message:
     """MAV_CMD_REQUEST_MESSAGE (512): param1 = the id of the message wanted (e.g. HOME_POSITION 242)."""
     return command_long(mavlink2.MAV_CMD_REQUEST_MESSAGE, (float(int(message_id)),), **target)
+
+
+def set_message_interval_command(message_id: int, rate_hz: float, **target) -> mavlink2.MAVLink_command_long_message:
+    """MAV_CMD_SET_MESSAGE_INTERVAL (511): param1 = message id, param2 = interval in microseconds."""
+    return command_long(mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL,
+                        (float(int(message_id)), float(round(1e6 / float(rate_hz)))), **target)
 
 
 def set_mode_command(autopilot: Autopilot, role: ModeRole, armed: bool, **target) -> mavlink2.MAVLink_command_long_message:

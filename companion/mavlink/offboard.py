@@ -1,4 +1,4 @@
-"""The offboard sequence PX4 needs, as a pure state machine (no clock, no I/O).
+"""The offboard sequence an autopilot needs (PX4, ArduPilot), as a pure state machine (no clock, no I/O).
 
 (Over 400 lines: one state machine, its configuration and its phases; a split would
 separate transitions that must be read together: arm, take off, engage, hand back.)
@@ -15,9 +15,23 @@ Phases::
     WAIT_AUTOPILOT -> [ARMING] -> [TAKEOFF] -> WAIT_ARMED -> PRESTREAM
         -> REQUEST_OFFBOARD -> ENGAGED --hand_back()--> HANDING_BACK -> HELD
     ENGAGED --heartbeat leaves OFFBOARD or disarms--> PILOT_TOOK_OVER (terminal
-        unless ``reengage``, which goes back to PRESTREAM)
+        unless ``reengage``, which goes back to PRESTREAM); ``left_by`` says whether it was
+        the autopilot's own failsafe (HEARTBEAT system_status CRITICAL, or within 3 s of a
+        HEARTBEAT gap over 1.5 s) or a pilot
     any but PILOT_TOOK_OVER/GAVE_UP --no autopilot HEARTBEAT > 3 s--> LINK_LOST
     ARMING / TAKEOFF / REQUEST_OFFBOARD --retries exhausted--> GAVE_UP
+    WAIT_AUTOPILOT --found armed in a failsafe (CRITICAL), no ``reengage``--> GAVE_UP
+
+What differs between autopilots is the autopilot's
+:class:`~companion.mavlink.autopilots.base.EngagementPlan`, never a branch on its name. ArduPilot's
+(ArduCopter) adds WAIT_READY (nothing is commanded until its estimator status says it can fly,
+EKF_STATUS_REPORT), requests its streams (MAV_CMD_SET_MESSAGE_INTERVAL, every
+:data:`STREAM_REQUEST_PERIOD_S` until it is ready and its pose flows), asks for GUIDED (the offboard
+role) in ARMING before arming, takes off in GUIDED with param7 above home and ends TAKEOFF when the
+vehicle's own estimate holds the height; PRESTREAM then engages at once (the vehicle is in GUIDED)::
+
+    WAIT_AUTOPILOT -> WAIT_READY -> ARMING (GUIDED, then arm) -> TAKEOFF (in GUIDED, by height)
+        -> PRESTREAM -> ENGAGED --hand_back()--> HANDING_BACK (LOITER or BRAKE) -> HELD
 
 ARMING and TAKEOFF run only when configured (``arm``, ``takeoff_alt_m``);
 otherwise WAIT_ARMED waits for the pilot to arm. A takeoff waits for the home
@@ -61,7 +75,8 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink import messages
-from companion.mavlink.autopilots import Autopilot, ModeRole
+from companion.errors import ConfigError
+from companion.mavlink.autopilots import AUTOPILOT_CHOICES, Autopilot, ModeRole, by_choice
 from companion import validation as check
 from companion.mavlink.messages import CommandAck, VehicleHeartbeat
 
@@ -72,6 +87,7 @@ class Phase(enum.Enum):
     """Phases of the offboard sequence."""
 
     WAIT_AUTOPILOT = "WAIT_AUTOPILOT"
+    WAIT_READY = "WAIT_READY"
     ARMING = "ARMING"
     TAKEOFF = "TAKEOFF"
     WAIT_ARMED = "WAIT_ARMED"
@@ -92,6 +108,30 @@ _FINAL = frozenset({Phase.LINK_LOST, Phase.GAVE_UP, Phase.PILOT_TOOK_OVER, Phase
 
 #: Upper bound of every offboard duration setting (s): a day is already absurd.
 MAX_OFFBOARD_SECONDS = 86_400.0
+
+#: ``hand_back_mode`` values: the autopilot's hold (PX4 Hold, ArduCopter LOITER) or its brake
+#: (ArduCopter BRAKE; PX4's Hold brakes too).
+HAND_BACK_MODES = {"hold": ModeRole.HOLD, "brake": ModeRole.BRAKE}
+
+#: A takeoff that ends by height (:attr:`EngagementPlan.takeoff_ends_by_height`) is complete when
+#: the vehicle's estimate is within this of the height asked (m) and climbs slower than
+#: :data:`TAKEOFF_CLIMB_MPS`.
+TAKEOFF_HEIGHT_TOLERANCE_M = 0.1
+TAKEOFF_CLIMB_MPS = 0.1
+
+#: A HEARTBEAT gap (s) after which a vehicle found out of the offboard mode counts as having left it
+#: by the autopilot's own failsafe (the link was silent: PX4 leaves OFFBOARD COM_OF_LOSS_T, 1 s,
+#: after the last setpoint it received), not by a pilot. Autopilots send HEARTBEAT at 1 Hz: a gap
+#: over 1.5 s means at least one was lost.
+FAILSAFE_SILENCE_S = 1.5
+#: ... or a silence that ended at most this long before (s): the autopilot may show the mode it fell
+#: back to a HEARTBEAT or two after the link came back (PX4 left OFFBOARD 1.3 to 1.8 s after the last
+#: setpoint on SITL).
+FAILSAFE_AFTER_SILENCE_S = 3.0
+
+#: Seconds between repeats of the stream requests (MAV_CMD_SET_MESSAGE_INTERVAL) while the
+#: autopilot is not yet ready or its pose has not arrived.
+STREAM_REQUEST_PERIOD_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -124,12 +164,32 @@ class OffboardConfig:
         target (NAV_MC_ALT_RAD, 0.8 m by default) and closes the rest in Hold
         (measured on PX4 SITL: 4.67 m at the switch, still climbing toward 5 m).
     reengage : bool
-        Request OFFBOARD again after the vehicle left it while engaged.
+        Request OFFBOARD again after the vehicle left it while engaged; and take over a vehicle
+        found armed in a failsafe at the start (a restarted companion), which otherwise gives up
+        at once.
     hold_after_goal_s : float or None
         Seconds after :meth:`OffboardSequencer.on_goal_reached` to hand the
         vehicle back (Hold, see :meth:`OffboardSequencer.hand_back`); None never.
     heartbeat_timeout_s : float
         Autopilot heartbeat silence that counts as a lost link (MAVSDK: 3 s).
+    target_system : int or None
+        The MAVLink system id of the only vehicle the companion may command; None
+        follows the first autopilot heard. Without it, ``arm`` first listens
+        ``autopilot_listen_s`` and refuses to arm when more than one autopilot system
+        is heard (GAVE_UP, naming them).
+    autopilot_listen_s : float
+        Seconds of listening for further autopilots before arming without a
+        ``target_system`` (autopilots send HEARTBEAT at 1 Hz).
+    autopilot : str
+        ``"auto"`` follows the first registered autopilot heard; ``"px4"`` or ``"ardupilot"``
+        only an autopilot of that kind (``companion fly --autopilot``).
+    hand_back_mode : str
+        Where the companion hands the vehicle back: ``"hold"`` (PX4 Hold, ArduCopter LOITER)
+        or ``"brake"`` (ArduCopter BRAKE; PX4 Hold).
+    brake_hand_back_s : float or None
+        Hand the vehicle back after braking this long (stale estimate, no valid plan) once
+        the braking command is zero; None: the autopilot's default (PX4 never, ArduPilot 2 s:
+        ArduCopter stays in GUIDED whatever happens to the stream).
     """
 
     prestream_s: float = 1.0
@@ -142,10 +202,15 @@ class OffboardConfig:
     reengage: bool = False
     heartbeat_timeout_s: float = 3.0
     hold_after_goal_s: float | None = None
+    target_system: int | None = None
+    autopilot_listen_s: float = 1.5
+    autopilot: str = "auto"
+    hand_back_mode: str = "hold"
+    brake_hand_back_s: float | None = None
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
-        for name in ("prestream_s", "takeoff_timeout_s", "takeoff_settle_s"):
+        for name in ("prestream_s", "takeoff_timeout_s", "takeoff_settle_s", "autopilot_listen_s"):
             set_(name, check.number(name, getattr(self, name), lo=0.0, hi=MAX_OFFBOARD_SECONDS))
         for name in ("retry_period_s", "heartbeat_timeout_s"):
             set_(name, check.number(name, getattr(self, name), positive=True, hi=MAX_OFFBOARD_SECONDS))
@@ -154,6 +219,14 @@ class OffboardConfig:
         check.boolean("reengage", self.reengage)
         if self.takeoff_alt_m is not None:
             set_("takeoff_alt_m", check.number("takeoff_alt_m", self.takeoff_alt_m, positive=True, hi=10_000.0))
+        if self.target_system is not None:
+            check.integer("target_system", self.target_system, lo=1, hi=255)
+        if self.autopilot not in AUTOPILOT_CHOICES:
+            raise ConfigError(f"autopilot must be one of {', '.join(AUTOPILOT_CHOICES)}, got {self.autopilot!r}")
+        if self.hand_back_mode not in HAND_BACK_MODES:
+            raise ConfigError(f"hand_back_mode must be one of {', '.join(HAND_BACK_MODES)}, got {self.hand_back_mode!r}")
+        if self.brake_hand_back_s is not None:
+            set_("brake_hand_back_s", check.number("brake_hand_back_s", self.brake_hand_back_s, lo=0.0, hi=MAX_OFFBOARD_SECONDS))
         if self.hold_after_goal_s is not None:
             set_("hold_after_goal_s", check.number("hold_after_goal_s", self.hold_after_goal_s, lo=0.0, hi=MAX_OFFBOARD_SECONDS))
 
@@ -223,20 +296,38 @@ class OffboardSequencer:
         self.config = config or OffboardConfig()
         self._phase = Phase.WAIT_AUTOPILOT
         self._since: float | None = None
-        self._reason = "waiting for a PX4 autopilot HEARTBEAT"
+        self._reason = "waiting for an autopilot HEARTBEAT"
         self._target: tuple[int, int] | None = None
         self._hb: VehicleHeartbeat | None = None
         self._hb_t: float | None = None
         self._hb_new = False
+        self._silence_s = 0.0  # the longest recent HEARTBEAT gap (s), over FAILSAFE_SILENCE_S
+        self._silence_end_s: float | None = None  # link time that gap ended
+        #: Why the vehicle last left the offboard mode while engaged: ``"failsafe"`` (the autopilot's
+        #: own, after link silence or shown by its HEARTBEAT's system_status CRITICAL) or ``"pilot"``;
+        #: None while it has not.
+        self.left_by: str | None = None
         self._pending: _Pending | None = None
         self._was_engaged = False
+        self._hand_back_asked = False   # hand_back() was called: leaving OFFBOARD from here on is what we asked
         self._seen_takeoff_mode = False
         self._takeoff_done_s: float | None = None  # link time AUTO.LOITER was first seen after the takeoff
         self._home_alt_amsl_m: float | None = None
         self._home_requested_s: float | None = None
         self._goal_s: float | None = None
+        self._first_hb_s: float | None = None  # link time the followed autopilot was first heard
+        self._other_systems: set[int] = set()  # autopilot systems heard besides the one followed
+        self._other_kinds: set[tuple[int, int]] = set()  # autopilots of a kind not asked for (--autopilot)
+        self._wanted_kind: Autopilot | None = by_choice(self.config.autopilot)
+        self._ready = False  # the autopilot's estimator status says it can fly (EngagementPlan.wait_ready)
+        self._height_m: float | None = None  # the vehicle's own height above home (its estimate), m
+        self._climb_mps: float | None = None
+        self._home_local_z_m = 0.0
+        self._streams_s: float | None = None  # link time the stream requests were last sent
+        self._pose_seen = False  # a pose of the autopilot arrived since the streams were requested
         self._actions: list[Action] = []
         self.events: list[Event] = []
+        self._start_held: str | None = None  # why the sequence may not leave WAIT_AUTOPILOT yet
 
     # ------------------------------------------------------------------ state
 
@@ -260,17 +351,39 @@ class OffboardSequencer:
         """(system, component) of the autopilot, once seen."""
         return self._target
 
+    @property
+    def kind(self) -> Autopilot | None:
+        """The followed autopilot's kind, once heard."""
+        return None if self._hb is None else self._hb.kind
+
+    @property
+    def vehicle_mode(self) -> str | None:
+        """The followed autopilot's mode in its latest HEARTBEAT (its own name for it), once heard."""
+        return None if self._hb is None else (self._hb.mode or "unknown mode")
+
     # ------------------------------------------------------------------ inputs
 
     def on_heartbeat(self, t_s: float, hb: VehicleHeartbeat) -> None:
         """Feed any decoded HEARTBEAT; only the (first) autopilot's count (one of a registered kind)."""
         if not hb.is_autopilot:
             return
-        if self._target is None:
-            self._target = hb.key
-        elif hb.key != self._target:
-            logger.debug("ignoring HEARTBEAT of a second autopilot %s (following %s)", hb.key, self._target)
+        if self._wanted_kind is not None and hb.kind is not self._wanted_kind:
+            if hb.key not in self._other_kinds:
+                self._other_kinds.add(hb.key)
+                logger.info("autopilot %s is %s, not %s: not following it", hb.key,
+                            hb.kind.name if hb.kind else "unknown", self._wanted_kind.name)
             return
+        wanted = self.config.target_system
+        if (wanted is not None and hb.key[0] != wanted) or (self._target is not None and hb.key != self._target):
+            if hb.key[0] not in self._other_systems and (self._target is None or hb.key[0] != self._target[0]):
+                self._other_systems.add(hb.key[0])
+                logger.info("autopilot system %d heard; not following it (%s)", hb.key[0],
+                            f"target system {wanted}" if wanted is not None else f"following {self._target}")
+            return
+        if self._target is None:
+            self._target, self._first_hb_s = hb.key, t_s
+        if self._hb_t is not None and t_s - self._hb_t > FAILSAFE_SILENCE_S:
+            self._silence_s, self._silence_end_s = t_s - self._hb_t, t_s
         self._hb, self._hb_t, self._hb_new = hb, t_s, True
         if hb.role is ModeRole.TAKEOFF:
             self._seen_takeoff_mode = True
@@ -313,6 +426,34 @@ class OffboardSequencer:
         if math.isfinite(alt_amsl_m):
             self._home_alt_amsl_m = float(alt_amsl_m)
 
+    def on_home_local_z(self, local_z_m: float) -> None:
+        """Home's down coordinate in the autopilot's local frame (HOME_POSITION ``z``, m): a takeoff
+        that ends by height measures the height from it."""
+        if math.isfinite(local_z_m):
+            self._home_local_z_m = float(local_z_m)
+
+    def on_estimator_status(self, t_s: float, flags: int) -> None:
+        """The autopilot's estimator status (EKF_STATUS_REPORT ``flags``): whether it is ready to fly."""
+        if self._hb is None or self._hb.kind is None:
+            return
+        ready = bool(self._hb.kind.ready(flags))
+        if ready != self._ready:
+            logger.info("autopilot %s ready to fly (estimator flags %d)", "now" if ready else "no longer", int(flags))
+        self._ready = ready
+        self._advance(t_s)
+
+    def on_vehicle_position(self, t_s: float, z_ned_m: float, vz_ned_mps: float | None) -> None:
+        """The autopilot's own position estimate's down coordinate (m, local NED) and down velocity
+        (m/s), for a takeoff that ends by height."""
+        if not math.isfinite(z_ned_m):
+            return
+        self._pose_seen = True
+        self._height_m = -(float(z_ned_m) - self._home_local_z_m)
+        self._climb_mps = None if vz_ned_mps is None or not math.isfinite(vz_ned_mps) else -float(vz_ned_mps)
+        if self._phase is Phase.TAKEOFF and self._hb is not None and self._hb.kind is not None \
+                and self._hb.kind.engagement.takeoff_ends_by_height:
+            self._advance(t_s)
+
     def step(self, t_s: float) -> list[Action]:
         """Advance time to ``t_s`` (seconds, the loop's clock); return the actions to take."""
         if self._since is None:
@@ -328,6 +469,7 @@ class OffboardSequencer:
             self.hand_back(t_s, "goal reached")
         self._advance(t_s)
         self._request_home(t_s)
+        self._request_streams(t_s)
         self._retry(t_s)
         actions, self._actions = self._actions, []
         return actions
@@ -337,24 +479,69 @@ class OffboardSequencer:
         if self._goal_s is None:
             self._goal_s = t_s
 
-    def hand_back(self, t_s: float, reason: str = "mission complete") -> None:
+    def hand_back(self, t_s: float, reason: str = "mission complete") -> bool:
         """Ask for Hold (AUTO.LOITER) and keep streaming until the HEARTBEAT shows the vehicle out of OFFBOARD.
 
         Only from PRESTREAM, REQUEST_OFFBOARD or ENGAGED (a vehicle we may be
-        streaming to); elsewhere nothing is streaming and nothing is done.
+        streaming to); elsewhere nothing is streaming and nothing is done. Returns
+        whether the hand-back started.
         """
         if self._phase not in (Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED):
-            return
+            return False
         self._pending = None
-        self._transition(t_s, Phase.HANDING_BACK, f"{reason}; requesting Hold ({self._mode(ModeRole.HOLD)})",
-                         mavlink2.MAV_SEVERITY_NOTICE)
+        self._hand_back_asked = True
+        role = HAND_BACK_MODES[self.config.hand_back_mode]
+        self._transition(t_s, Phase.HANDING_BACK, f"{reason}; requesting {'Hold' if role is ModeRole.HOLD else 'Brake'} "
+                         f"({self._mode(role)})", mavlink2.MAV_SEVERITY_NOTICE)
         if self._target is not None:
-            self._send(t_s, messages.set_mode_command(self._kind, ModeRole.HOLD, bool(self._hb and self._hb.armed), **self._tgt()))
+            self._send(t_s, messages.set_mode_command(self._kind, role, bool(self._hb and self._hb.armed), **self._tgt()))
         self._advance(t_s)
+        return True
+
+    def _request_streams(self, t_s: float) -> None:
+        """Ask for the messages the autopilot does not send by itself (MAV_CMD_SET_MESSAGE_INTERVAL, one per
+        message), as soon as it is heard, and again every :data:`STREAM_REQUEST_PERIOD_S` until it is ready
+        and its pose arrives."""
+        if self._target is None or self._hb is None or self._hb.kind is None or not self._hb.kind.streams:
+            return
+        if self._phase is Phase.LINK_LOST:
+            self._streams_s, self._pose_seen = None, False  # asked again when it is back (it may have rebooted)
+            return
+        if self._streams_s is not None and (t_s - self._streams_s < STREAM_REQUEST_PERIOD_S
+                                            or (self._pose_seen and self._ready_to_fly())):
+            return
+        self._streams_s = t_s
+        for message_id, rate_hz in self._hb.kind.streams:
+            self._actions.append(SendCommand(messages.set_message_interval_command(message_id, rate_hz, **self._tgt())))
+
+    def _ready_to_fly(self) -> bool:
+        return self._ready or not self._kind.engagement.wait_ready
+
+    def hold_start(self, reason: str) -> None:
+        """Stay in WAIT_AUTOPILOT (no arming, take-off or streaming) until :meth:`release_start`:
+        the loop has something to settle first (a goal not placed yet); the autopilot is still
+        followed (:attr:`target`) and its link watched."""
+        self._start_held = reason
+
+    def release_start(self, t_s: float) -> None:
+        """End :meth:`hold_start`: the sequence goes on from the latest HEARTBEAT at link time ``t_s``."""
+        if self._start_held is not None:
+            self._start_held = None
+            self._advance(t_s)
+
+    def give_up(self, t_s: float, reason: str) -> bool:
+        """Give up before anything of ours is in force (GAVE_UP, said with ``reason``); whether it did
+        (not while streaming: :meth:`hand_back` ends that)."""
+        if self._phase in _STREAMING or self._phase in _FINAL:
+            return False
+        self._pending = None
+        self._transition(t_s, Phase.GAVE_UP, reason, mavlink2.MAV_SEVERITY_WARNING)
+        return True
 
     def _request_home(self, t_s: float) -> None:
         """Request HOME_POSITION every retry period while a takeoff needs it."""
         if (self.config.takeoff_alt_m is None or self._home_alt_amsl_m is not None or self._target is None
+                or self._kind.engagement.takeoff_above_home
                 or self._seen_takeoff_mode or self._phase not in (Phase.ARMING, Phase.TAKEOFF, Phase.WAIT_ARMED)):
             return
         if self._home_requested_s is None or t_s - self._home_requested_s >= self.config.retry_period_s:
@@ -378,12 +565,31 @@ class OffboardSequencer:
             return
         fresh, self._hb_new = self._hb_new, False
         if phase is Phase.WAIT_AUTOPILOT:
-            self._transition(t_s, self._entry_phase(hb), f"autopilot {hb.key} found in {hb.mode or 'unknown mode'}")
+            if self._start_held is not None or self._must_listen(t_s, hb):
+                return
+            if self._ambiguous(t_s, hb) or self._flown_by_another(t_s, hb):
+                return
+            found = f"autopilot {hb.key} found in {hb.mode or 'unknown mode'}"
+            if hb.armed and hb.role is ModeRole.HOLD and self.config.takeoff_alt_m is not None:
+                # already armed and holding: flying (a vehicle on the ground does not hold armed
+                # for long); a takeoff command would be ignored there, so it is skipped
+                self._seen_takeoff_mode = True
+                found += ", armed: already flying, no takeoff"
+            self._transition(t_s, self._entry_phase(hb), found)
+        elif phase is Phase.WAIT_READY:
+            if self._ready and not self._ambiguous(t_s, hb):
+                self._transition(t_s, self._entry_phase(hb), "autopilot ready to fly (its estimator status)")
         elif phase is Phase.LINK_LOST:
             if not fresh:
                 return
             if self._was_engaged:
-                if hb.offboard and hb.armed:
+                if self._hand_back_asked and (not hb.offboard or not hb.armed):
+                    # the link went while handing back, and the vehicle is out of OFFBOARD: the hand-back
+                    # it was asked for (not a failsafe; had the request been lost, PX4 is in its own)
+                    self._transition(t_s, Phase.HELD, f"link back; vehicle in {hb.mode or 'unknown mode'}"
+                                     + ("" if hb.armed else ", disarmed") + " after the hand-back; stopped streaming",
+                                     mavlink2.MAV_SEVERITY_NOTICE)
+                elif hb.offboard and hb.armed:
                     self._transition(t_s, Phase.ENGAGED, f"link back; vehicle still in {self._mode(ModeRole.OFFBOARD)}, resuming")
                 else:
                     self._left_offboard(t_s, f"link back; vehicle left {self._mode(ModeRole.OFFBOARD)} for {hb.mode}")
@@ -393,8 +599,13 @@ class OffboardSequencer:
             if hb.armed:
                 self._pending = None
                 self._transition(t_s, self._after_armed(), "armed")
-            elif self._pending is None:
+            elif self._kind.engagement.mode_before_arming and not hb.offboard:
+                if self._pending is None or self._pending.command != mavlink2.MAV_CMD_DO_SET_MODE:
+                    self._send(t_s, messages.set_mode_command(self._kind, ModeRole.OFFBOARD, False, **self._tgt()))
+            elif self._pending is None or self._pending.command != mavlink2.MAV_CMD_COMPONENT_ARM_DISARM:
                 self._send(t_s, messages.arm_command(True, **self._tgt()))
+        elif phase is Phase.TAKEOFF and self._kind.engagement.takeoff_ends_by_height:
+            self._takeoff_by_height(t_s, hb)
         elif phase is Phase.TAKEOFF:
             if self._home_alt_amsl_m is None and not self._seen_takeoff_mode:
                 if self._since is not None and t_s - self._since > cfg.takeoff_timeout_s:
@@ -443,7 +654,74 @@ class OffboardSequencer:
             elif not hb.armed:
                 self._left_offboard(t_s, "vehicle disarmed")
 
+    def _takeoff_by_height(self, t_s: float, hb: VehicleHeartbeat) -> None:
+        """TAKEOFF of an autopilot that takes off in its offboard mode (ArduCopter in GUIDED): the mode
+        first, then MAV_CMD_NAV_TAKEOFF (param7 from the autopilot), complete when the vehicle's own
+        estimate holds the height (within :data:`TAKEOFF_HEIGHT_TOLERANCE_M`, climbing slower than
+        :data:`TAKEOFF_CLIMB_MPS`), then ``takeoff_settle_s``; nothing is streamed until then."""
+        cfg, pending = self.config, self._pending
+        target = cfg.takeoff_alt_m
+        if self._kind.engagement.mode_before_arming and not hb.offboard:
+            if pending is None or pending.command != mavlink2.MAV_CMD_DO_SET_MODE:
+                self._send(t_s, messages.set_mode_command(self._kind, ModeRole.OFFBOARD, hb.armed, **self._tgt()))
+            return
+        if self._takeoff_done_s is None:
+            if pending is None or pending.command != mavlink2.MAV_CMD_NAV_TAKEOFF:
+                self._send(t_s, messages.takeoff_command(self._takeoff_param7(), **self._tgt()))
+                return
+            height, climb = self._height_m, self._climb_mps
+            if (height is not None and target is not None and abs(height - target) <= TAKEOFF_HEIGHT_TOLERANCE_M
+                    and climb is not None and abs(climb) <= TAKEOFF_CLIMB_MPS):
+                self._pending = None
+                self._takeoff_done_s = t_s
+                self._event(t_s, f"takeoff height reached: {height:.2f} m above home (asked {target:.2f} m)")
+            elif t_s - pending.first_s > cfg.takeoff_timeout_s:
+                self._pending = None
+                self._transition(t_s, Phase.GAVE_UP, f"takeoff not complete after {cfg.takeoff_timeout_s:.0f} s "
+                                 f"(height {height if height is None else round(height, 2)} m)",
+                                 mavlink2.MAV_SEVERITY_WARNING)
+                return
+        if self._takeoff_done_s is not None and t_s - self._takeoff_done_s >= cfg.takeoff_settle_s - 1e-9:
+            self._seen_takeoff_mode = True  # done: never again
+            self._transition(t_s, Phase.PRESTREAM, f"takeoff complete ({hb.mode})"
+                             + (f", settled {cfg.takeoff_settle_s:.1f} s" if cfg.takeoff_settle_s else ""))
+
+    def _ambiguous(self, t_s: float, hb: VehicleHeartbeat) -> bool:
+        """Whether arming must be refused because several autopilots were heard and none is named
+        (goes to GAVE_UP, naming them)."""
+        if not (self._other_systems and self._would_arm(hb) and self.config.target_system is None):
+            return False
+        systems = ", ".join(str(k) for k in sorted({self._target[0], *self._other_systems}))
+        self._transition(t_s, Phase.GAVE_UP, f"autopilots of systems {systems} heard: not arming; "
+                         "name the vehicle with --target-system", mavlink2.MAV_SEVERITY_WARNING)
+        return True
+
+    def _flown_by_another(self, t_s: float, hb: VehicleHeartbeat) -> bool:
+        """Whether to give up at once because the vehicle is found armed in a failsafe (system_status
+        CRITICAL: its autopilot took it from a companion, this one before a restart perhaps, or
+        fell back for a reason of its own). Taking it over would fight the failsafe; ``reengage``
+        allows it (GAVE_UP otherwise, saying why). A vehicle found in the offboard mode itself is
+        engaged as before (tests and scripted flights start there)."""
+        if self.config.reengage or not hb.armed or hb.offboard or hb.system_status != mavlink2.MAV_STATE_CRITICAL:
+            return False
+        why = f"in a failsafe ({hb.mode})"
+        self._transition(t_s, Phase.GAVE_UP, f"vehicle found armed {why} (a restart?); not taking over "
+                         "(--reengage to)", mavlink2.MAV_SEVERITY_WARNING)
+        return True
+
+    def _would_arm(self, hb: VehicleHeartbeat) -> bool:
+        return not hb.armed and self.config.arm
+
+    def _must_listen(self, t_s: float, hb: VehicleHeartbeat) -> bool:
+        """Whether to wait longer before leaving WAIT_AUTOPILOT: only to arm without a named
+        target system, for ``autopilot_listen_s`` after the first autopilot HEARTBEAT."""
+        if self.config.target_system is not None or not self._would_arm(hb):
+            return False
+        return self._first_hb_s is not None and t_s - self._first_hb_s < self.config.autopilot_listen_s - 1e-9
+
     def _entry_phase(self, hb: VehicleHeartbeat) -> Phase:
+        if self._kind.engagement.wait_ready and not self._ready:
+            return Phase.WAIT_READY
         if hb.armed:
             return self._after_armed()
         return Phase.ARMING if self.config.arm else Phase.WAIT_ARMED
@@ -456,10 +734,20 @@ class OffboardSequencer:
     def _engage(self, t_s: float, reason: str) -> None:
         self._pending = None
         self._was_engaged = True
+        self.left_by = None
         self._transition(t_s, Phase.ENGAGED, reason, mavlink2.MAV_SEVERITY_NOTICE)
 
     def _left_offboard(self, t_s: float, reason: str) -> None:
         self._pending = None
+        hb = self._hb
+        critical = hb is not None and hb.system_status == mavlink2.MAV_STATE_CRITICAL
+        silent = self._silence_end_s is not None and t_s - self._silence_end_s <= FAILSAFE_AFTER_SILENCE_S
+        if critical or silent:
+            self.left_by = "failsafe"
+            reason += (f" (autopilot failsafe after {self._silence_s:.1f} s of link silence)" if silent
+                       else " (autopilot failsafe)")
+        else:
+            self.left_by = "pilot"
         if self.config.reengage:
             self._transition(t_s, Phase.PRESTREAM, reason + "; re-engaging", mavlink2.MAV_SEVERITY_WARNING)
         else:
@@ -470,7 +758,7 @@ class OffboardSequencer:
         pending, cfg = self._pending, self.config
         if pending is None or t_s - pending.last_s < cfg.retry_period_s:
             return
-        if self._phase is Phase.TAKEOFF:
+        if self._phase is Phase.TAKEOFF and pending.command == mavlink2.MAV_CMD_NAV_TAKEOFF:
             if self._seen_takeoff_mode or mavlink2.MAV_RESULT_ACCEPTED in pending.acks:
                 return  # accepted or climbing; the takeoff timeout decides
         if pending.attempts > cfg.max_retries:
@@ -480,14 +768,17 @@ class OffboardSequencer:
                              mavlink2.MAV_SEVERITY_WARNING)
             return
         armed = bool(self._hb and self._hb.armed)
-        if self._phase is Phase.ARMING:
+        if self._phase in (Phase.ARMING, Phase.TAKEOFF) and pending.command == mavlink2.MAV_CMD_DO_SET_MODE:
+            msg = messages.set_mode_command(self._kind, ModeRole.OFFBOARD, armed, confirmation=pending.attempts, **self._tgt())
+        elif self._phase is Phase.ARMING:
             msg = messages.arm_command(True, confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.TAKEOFF:
             msg = messages.takeoff_command(self._takeoff_param7(), confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.REQUEST_OFFBOARD:
             msg = messages.set_mode_command(self._kind, ModeRole.OFFBOARD, armed, confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.HANDING_BACK:
-            msg = messages.set_mode_command(self._kind, ModeRole.HOLD, armed, confirmation=pending.attempts, **self._tgt())
+            msg = messages.set_mode_command(self._kind, HAND_BACK_MODES[self.config.hand_back_mode], armed,
+                                            confirmation=pending.attempts, **self._tgt())
         else:
             self._pending = None
             return
@@ -516,15 +807,15 @@ class OffboardSequencer:
 
     def _takeoff_param7(self) -> float:
         alt = self.config.takeoff_alt_m
-        if alt is None or self._home_alt_amsl_m is None:
+        if alt is None:
             return math.nan
-        return self._home_alt_amsl_m + alt
+        return self._kind.takeoff_param7(alt, self._home_alt_amsl_m)
 
     def _transition(self, t_s: float, phase: Phase, reason: str, severity: int = mavlink2.MAV_SEVERITY_INFO) -> None:
         if phase is self._phase:
             return
         old = self._phase
-        if phase is Phase.TAKEOFF and self._home_alt_amsl_m is None:
+        if phase is Phase.TAKEOFF and self._home_alt_amsl_m is None and not self._kind.engagement.takeoff_above_home:
             reason += " (waiting for HOME_POSITION)"
         self._phase, self._since, self._reason = phase, t_s, reason
         logger.log(logging.WARNING if severity <= mavlink2.MAV_SEVERITY_WARNING else logging.INFO,

@@ -25,6 +25,8 @@ from types import TracebackType
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from companion.mavlink.autopilots import DIALECT
+
 from companion.errors import CompanionError
 
 logger = logging.getLogger(__name__)
@@ -123,6 +125,8 @@ def _check_tlog(path: Path) -> None:
         raise TlogError(f"tlog {path} is empty")
     with open(path, "rb") as f:
         head = f.read(_STAMP.size + 1)
+    if head.startswith(b"ULog"):
+        raise TlogError(f"{path} is a PX4 ULog, not a tlog: `companion identify` reads ULogs, this command needs a tlog")
     if len(head) < _STAMP.size + 1 or head[_STAMP.size] not in _MAGICS:
         raise TlogError(
             f"{path} is not a tlog: expected an 8-byte timestamp then a MAVLink packet "
@@ -176,7 +180,7 @@ def read_tlog(path: str | os.PathLike, *, include_bad: bool = False) -> Iterator
         f = open(path, "rb")  # noqa: SIM115 (closed in finally)
     except OSError as exc:
         raise TlogError(f"cannot open tlog {path}: {exc.strerror or exc}") from exc
-    parser = mavlink2.MAVLink(None)
+    parser = DIALECT.MAVLink(None)
     parser.robust_parsing = True
     good = bad = 0
     last_us: int | None = None

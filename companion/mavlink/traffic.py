@@ -5,7 +5,7 @@ LOCAL_POSITION_NED decoders are reused). Each decoder returns a
 :class:`TrafficReport` or a :class:`~companion.mavlink.messages.Rejected`, never raises.
 
 The Gaussian of each kind (NED metres; None means "unknown: the source's configured
-accuracy applies", see :mod:`companion.loop.obstacles`):
+accuracy applies", see :mod:`companion.loop.intake.obstacles`):
 
 ==========================  ==================================================================
 ODOMETRY                    ``pose_covariance`` / ``velocity_covariance`` x/y/z blocks
@@ -98,6 +98,9 @@ ADSB_EMITTER_RADIUS_M = {1: 6.0, 2: 10.0, 3: 20.0, 4: 30.0, 5: 35.0, 6: 6.0, 7: 
 #: The kinds this module decodes (message type names).
 TRAFFIC_KINDS = ("ODOMETRY", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "ADSB_VEHICLE",
                  "UTM_GLOBAL_POSITION", "OPEN_DRONE_ID_LOCATION")
+#: The reason a global report is refused while the autopilot's GPS_GLOBAL_ORIGIN is unknown
+#: (the intake counts it as waiting, not as a rejection: the origin is being asked for).
+NO_ORIGIN_YET = "no GPS_GLOBAL_ORIGIN yet"
 #: Kinds that need the autopilot's GPS_GLOBAL_ORIGIN.
 GLOBAL_KINDS = frozenset({"GLOBAL_POSITION_INT", "ADSB_VEHICLE", "UTM_GLOBAL_POSITION", "OPEN_DRONE_ID_LOCATION"})
 
@@ -169,6 +172,13 @@ Decoded = Union[TrafficReport, messages.Rejected]
 # --------------------------------------------------------------------------- projection
 
 
+
+def _before_origin(msg) -> messages.Rejected:
+    """A global report that came before the origin: refused for now, logged quietly (expected at start)."""
+    key = messages.source_key(msg)
+    logger.debug("%s from system %d component %d before the origin is known", msg.get_type(), key[0], key[1])
+    return messages.Rejected(key=key, msg_type=msg.get_type(), reason=NO_ORIGIN_YET)
+
 def global_to_ned(lat_deg: float, lon_deg: float, alt_m: float, origin: GlobalOrigin) -> np.ndarray:
     """Geodetic position to local NED metres about ``origin`` (PX4's azimuthal equidistant map)."""
     lat, lon = math.radians(lat_deg), math.radians(lon_deg)
@@ -236,7 +246,7 @@ def decode_local_position_ned(msg, origin: GlobalOrigin | None = None) -> Decode
 def decode_global_position_int(msg, origin: GlobalOrigin | None) -> Decoded:
     """GLOBAL_POSITION_INT of another vehicle: lat/lon degE7, alt mm AMSL, v cm/s NED."""
     if origin is None:
-        return messages._reject(msg, "no GPS_GLOBAL_ORIGIN yet")
+        return _before_origin(msg)
     pos = global_to_ned(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, origin)
     vel = np.array([msg.vx, msg.vy, msg.vz], dtype=float) * 0.01
     return TrafficReport("GLOBAL_POSITION_INT", _system(msg), messages.source_key(msg), int(msg.time_boot_ms),
@@ -246,7 +256,7 @@ def decode_global_position_int(msg, origin: GlobalOrigin | None) -> Decoded:
 def decode_adsb_vehicle(msg, origin: GlobalOrigin | None) -> Decoded:
     """ADSB_VEHICLE: identity by ICAO address, time = arrival - ``tslc``; flags honoured."""
     if origin is None:
-        return messages._reject(msg, "no GPS_GLOBAL_ORIGIN yet")
+        return _before_origin(msg)
     flags = int(msg.flags)
     if not flags & ADSB_VALID_COORDS:
         return messages._reject(msg, "coordinates not valid (ADSB_FLAGS_VALID_COORDS clear)")
@@ -272,7 +282,7 @@ def _uas_id(raw) -> bytes:
 def decode_utm_global_position(msg, origin: GlobalOrigin | None) -> Decoded:
     """UTM_GLOBAL_POSITION: h_acc, v_acc (mm) and vel_acc (cm/s) as standard deviations."""
     if origin is None:
-        return messages._reject(msg, "no GPS_GLOBAL_ORIGIN yet")
+        return _before_origin(msg)
     flags = int(msg.flags)
     if not flags & UTM_POSITION_AVAILABLE or not flags & UTM_ALTITUDE_AVAILABLE:
         return messages._reject(msg, "position or altitude not available (UTM_DATA_AVAIL_FLAGS)")
@@ -305,7 +315,7 @@ def decode_open_drone_id_location(msg, origin: GlobalOrigin | None) -> Decoded:
     hour is a jump that restarts the source's clock mapping.
     """
     if origin is None:
-        return messages._reject(msg, "no GPS_GLOBAL_ORIGIN yet")
+        return _before_origin(msg)
     if msg.latitude == 0 and msg.longitude == 0:
         return messages._reject(msg, "position unknown (latitude and longitude 0)")
     if not msg.altitude_geodetic > ODID_UNKNOWN_ALTITUDE:  # also NaN

@@ -6,6 +6,12 @@ the closed-loop tests use it. The two sides exchange real MAVLink bytes through 
 :class:`~companion.mavlink.link.MemoryLink`; there are no sockets and no sleeping, and the same
 seed gives the same run. Packet loss and other link faults are applied here, between
 the two sides, by dropping whole packets.
+
+Each step of :func:`run_lockstep` advances mavsim by one setpoint period, delivers what it
+sent, and has the loop's :class:`~companion.loop.driver.Driver` receive every message and
+tick once at mavsim's time; the harness decides only when (mavsim's clock) and what the
+packets meet on the way (loss). The driver has no recorder here: the memory links record
+what crosses them (``tlog_path``), so a lockstep tlog has no marks.
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ import numpy as np
 
 from companion.core import jit
 from companion.loop.app import Companion
+from companion.loop.driver import Driver
 from companion.mavlink.link import MemoryLink
 from companion.mavlink.offboard import OffboardConfig
 from companion.offline.report import run_report
@@ -59,6 +66,22 @@ class RunResult:
                 "slack": companion_slack_report(self.companion).to_json()}
 
 
+class StepPort:
+    """The lockstep driver's :class:`~companion.loop.driver.Port`: the companion's memory link.
+
+    Everything sent in a step reaches mavsim together at the step's end, and is stamped in the
+    link's tlog with the link's clock (mavsim's time then: a tick's time, and for an answer to
+    a message received during the step, the step's end), as lockstep logs always were.
+    """
+
+    def __init__(self, link: MemoryLink) -> None:
+        self.link = link
+
+    def send(self, msg, t_s: float) -> bytes:
+        """Send ``msg`` on the memory link (``t_s``, s, is not used: see the class docstring)."""
+        return self.link.send(msg)
+
+
 #: A scenario as ``run_lockstep`` takes it: a TOML file, or its parsed tables (``tomllib`` output).
 ScenarioSource = str | Path | Mapping[str, Any]
 
@@ -75,6 +98,9 @@ def run_lockstep(
     offboard: OffboardConfig | None = None,
     stop_after_goal_s: float | None = 2.0,
     inject: Callable[[float], list[bytes]] | None = None,
+    inject_vehicle: Callable[[float], list[bytes]] | None = None,
+    after_tick: Callable[[Companion, float, list], None] | None = None,
+    autopilot: str | None = None,
     **planner_overrides,
 ) -> RunResult:
     """Fly one scenario in lockstep: ``mavsim`` and the companion over MAVLink bytes.
@@ -92,14 +118,19 @@ def run_lockstep(
         random in both directions.
     stop_after_goal_s : end the run this long after the truth says the goal was reached.
     inject : ``inject(t_s) -> [packet, ...]`` extra packets delivered to the companion.
+    inject_vehicle : ``inject_vehicle(t_s) -> [packet, ...]`` extra packets written to the vehicle
+        after each tick's outbox (another ground station on its link: a mode switch).
+    after_tick : ``after_tick(companion, t_s, outbox)`` after every tick (a view, :mod:`companion.view`).
+    autopilot : the autopilot mavsim imitates (a name of ``mavsim.personalities.PERSONALITIES``,
+        e.g. ``"ardupilot"``); None: mavsim's default (PX4).
     **planner_overrides : replace ``[planner]`` keys (e.g. ``formulation``, ``c_max``).
     """
     if isinstance(scenario, (str, Path)):
         config = load_scenario(scenario, **planner_overrides)
-        sim = LockstepSimulator.from_file(scenario, seed=seed, tlog=sim_tlog_path)
+        sim = LockstepSimulator.from_file(scenario, seed=seed, tlog=sim_tlog_path, **_personality(autopilot))
     else:
         config, sim_scenario = _parse(scenario, planner_overrides)
-        sim = LockstepSimulator(sim_scenario, seed=seed, tlog=sim_tlog_path)
+        sim = LockstepSimulator(sim_scenario, seed=seed, tlog=sim_tlog_path, **_personality(autopilot))
     companion = Companion(config, offboard=offboard)
     jit.warm_up()  # load the compiled kernels now, not inside the first solve (its reported solve time)
     link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path, tlog_offset_s=LOCKSTEP_EPOCH_S)
@@ -108,8 +139,9 @@ def run_lockstep(
     obstacle_link = (MemoryLink(clock=lambda: sim.time_s, name="obstacles1", receive_only=True, tlog=link.tlog,
                                 tlog_offset_s=LOCKSTEP_EPOCH_S)
                      if sim.has_obstacle_link else None)
+    driver = Driver(companion, StepPort(link))  # no recorder: the links record what crosses them, no marks
     rng = np.random.default_rng([seed, 0xC0FFEE])
-    dt = 1.0 / config.loop.setpoint_rate_hz
+    dt = 1.0 / config.companion.setpoint_rate_hz
     limit = config.duration_s if duration_s is None else float(duration_s)
     dropped = 0
     goal_t: float | None = None
@@ -133,8 +165,7 @@ def run_lockstep(
                 for packet in inject(sim.time_s):
                     link.deliver(sim.time_s, packet)
             for rx in link.poll():
-                for msg in companion.handle(rx):  # TIMESYNC answers
-                    link.send(msg)
+                driver.receive(rx)
             if obstacle_link is not None:
                 for t_pkt, packet in sim.take_obstacle_packets():
                     if lost(t_pkt, "to_companion", packet):
@@ -142,10 +173,11 @@ def run_lockstep(
                         continue
                     obstacle_link.deliver(t_pkt, packet)
                 for rx in obstacle_link.poll():
-                    companion.handle(rx)  # obstacle links are receive-only: nothing is answered there
+                    driver.receive(rx)  # nothing answers obstacle traffic
             n_records = len(companion.records)
-            for msg in companion.tick(sim.time_s):
-                link.send(msg)
+            outbox = driver.tick(sim.time_s)
+            if after_tick is not None:
+                after_tick(companion, sim.time_s, outbox)
             if len(companion.records) > n_records:
                 tr = sim.truth
                 replan_truth.append((tr.t_s, tr.drone_position_ned_m, tr.obstacle_positions_ned_m))
@@ -154,6 +186,9 @@ def run_lockstep(
                     dropped += 1
                     continue
                 sim.write(packet)
+            if inject_vehicle is not None:
+                for packet in inject_vehicle(sim.time_s):
+                    sim.write(packet)
             if stop_after_goal_s is not None:
                 if goal_t is None and sim.goal_reached_t_s is not None:   # not summary(): every tick
                     goal_t = sim.time_s
@@ -176,6 +211,11 @@ def run_lockstep(
         if obstacle_link is not None:
             obstacle_link.close()
         sim.close()
+
+
+def _personality(autopilot: str | None) -> dict:
+    """LockstepSimulator's ``personality`` keyword for ``autopilot`` (none: mavsim's default)."""
+    return {} if autopilot is None else {"personality": autopilot}
 
 
 def _parse(data: Mapping[str, Any], planner_overrides: dict) -> tuple[CompanionScenario, Any]:

@@ -1,8 +1,9 @@
-"""Identify the vehicle's velocity response from a flight log (pure fitting, no I/O but the tlog read).
+"""Identify the vehicle's velocity response from a flight log (pure fitting, no I/O but the log read).
 
-A log holds the velocity setpoints the companion streamed (SET_POSITION_TARGET_LOCAL_NED,
+A tlog holds the velocity setpoints the companion streamed (SET_POSITION_TARGET_LOCAL_NED,
 velocity or position + velocity feed-forward) and the vehicle's velocity
-(LOCAL_POSITION_NED or ODOMETRY). Only stretches in OFFBOARD count. The model fitted per
+(LOCAL_POSITION_NED or ODOMETRY); a PX4 ULog the same as uORB topics
+(:mod:`companion.offline.ulog`). Only stretches in OFFBOARD count. The model fitted per
 axis group (horizontal: north and east together; vertical) is
 :class:`~companion.core.planner.vehicle_model.AxisResponse`, a PI velocity loop with an
 acceleration lag against linear drag; the first-order lag is its special case.
@@ -43,6 +44,16 @@ GRID_S = 0.05
 POSITION_GAIN_PER_S = (0.95, 0.95, 1.0)
 #: At most this many log messages are read (bounded input).
 MAX_MESSAGES = 5_000_000
+#: Smallest velocity step (m/s, largest minus smallest command within one OFFBOARD stretch)
+#: that each axis group needs for its response to be identified: without one the fit has
+#: nothing to fit and returns whatever its start and bounds make of the noise (a log of
+#: hover gave K_i 18.8). The identification flight steps by 1 to 3 m/s.
+MIN_STEP_MPS = 0.5
+#: Bounds of the prediction horizon, seconds: at least one step of the grid, at most a
+#: planner step (``[planner] step_s`` is at most 5 s).
+HORIZON_RANGE_S = (GRID_S, 5.0)
+#: Bounds of the reference lag, seconds.
+REFERENCE_LAG_RANGE_S = (0.01, 10.0)
 
 
 class IdentifyError(CompanionError, ValueError):
@@ -85,18 +96,51 @@ class ResponseLog:
 
 
 def load_response_log(path: str | Path, grid_s: float = GRID_S) -> ResponseLog:
-    """Read a tlog into OFFBOARD stretches of (command, measured velocity) on a ``grid_s`` grid.
+    """Read a flight log into OFFBOARD stretches of (command, measured velocity) on a ``grid_s`` grid.
+
+    A tlog, or a PX4 ULog (recognised by its magic ``ULog``; read by
+    :func:`companion.offline.ulog.load_ulog_series`, which needs the ``view`` extra).
 
     Raises
     ------
     IdentifyError
         When the log has no autopilot, no setpoints, no vehicle velocity or no OFFBOARD stretch.
     TlogError
-        When the file is not a tlog.
+        When the file is neither a ULog nor a tlog.
     """
     path = Path(path)
+    from companion.offline.ulog import is_ulog, load_ulog_series
+
+    if is_ulog(path):
+        return response_log(path, load_ulog_series(path), grid_s)
+    return response_log(path, _tlog_series(path), grid_s)
+
+
+@dataclass(frozen=True)
+class LogSeries:
+    """What identification needs from a log, on the log's own clock (seconds).
+
+    ``mode_t``/``mode_off``: the autopilot's mode reports and whether each said armed and in
+    OFFBOARD; ``sp_t``/``sp_v``/``sp_p``: the velocity setpoints (NED m/s) and their position
+    (NED m, NaN without one); ``vel_t``/``vel``/``pos``: the vehicle's velocity and position;
+    ``kinds``: setpoints per kind.
+    """
+
+    mode_t: np.ndarray
+    mode_off: np.ndarray
+    sp_t: np.ndarray
+    sp_v: np.ndarray
+    sp_p: np.ndarray
+    vel_t: np.ndarray
+    vel: np.ndarray
+    pos: np.ndarray
+    kinds: dict
+
+
+def _tlog_series(path: Path) -> LogSeries:
+    """A tlog's HEARTBEATs, SET_POSITION_TARGET_LOCAL_NED and LOCAL_POSITION_NED (or ODOMETRY)."""
     series: dict[str, list] = {"LOCAL_POSITION_NED": [], "ODOMETRY": []}
-    sp_t, sp_v, sp_p, sp_mask = [], [], [], []
+    sp_t, sp_v, sp_p = [], [], []
     mode_t, mode_off = [], []
     target = None
     kinds = {"velocity": 0, "position+velocity": 0}
@@ -127,19 +171,28 @@ def load_response_log(path: str | Path, grid_s: float = GRID_S) -> ResponseLog:
                 series[kind].append((t, obs.velocity_ned, obs.position_ned))
     # one source of velocity (LOCAL_POSITION_NED when the log has it): two would interleave
     samples = series["LOCAL_POSITION_NED"] if len(series["LOCAL_POSITION_NED"]) >= 10 else series["ODOMETRY"]
-    vel_t = [s[0] for s in samples]
-    vel = [s[1] for s in samples]
-    pos = [s[2] for s in samples]
     if target is None:
-        raise IdentifyError(f"{path}: no PX4 autopilot HEARTBEAT in the log")
+        raise IdentifyError(f"{path}: no autopilot HEARTBEAT (PX4 or ArduPilot) in the log")
     if not sp_t:
         raise IdentifyError(f"{path}: no velocity setpoints (SET_POSITION_TARGET_LOCAL_NED, LOCAL_NED) in the log")
-    if len(vel_t) < 10:
+    if len(samples) < 10:
         raise IdentifyError(f"{path}: no vehicle velocity (LOCAL_POSITION_NED or ODOMETRY of {target})")
-    vel_t, vel, pos = np.asarray(vel_t), np.asarray(vel, dtype=float), np.asarray(pos, dtype=float)
-    sp_t, sp_v, sp_p = np.asarray(sp_t), np.asarray(sp_v, dtype=float), np.asarray(sp_p, dtype=float)
-    mode_t, mode_off = np.asarray(mode_t), np.asarray(mode_off)
-    # OFFBOARD stretches from the heartbeats (a stretch ends at the first heartbeat out of it)
+    return LogSeries(np.asarray(mode_t), np.asarray(mode_off, dtype=bool), np.asarray(sp_t),
+                     np.asarray(sp_v, dtype=float), np.asarray(sp_p, dtype=float),
+                     np.asarray([s[0] for s in samples]), np.asarray([s[1] for s in samples], dtype=float),
+                     np.asarray([s[2] for s in samples], dtype=float), kinds)
+
+
+def response_log(path: Path, series: LogSeries, grid_s: float = GRID_S) -> ResponseLog:
+    """Cut ``series`` into OFFBOARD stretches on a ``grid_s`` grid (the setpoints held, the velocity interpolated).
+
+    With a position in a setpoint, the command is PX4's velocity-loop setpoint
+    ``v_ff + K (p_sp - p)`` (:data:`POSITION_GAIN_PER_S`).
+    """
+    mode_t, mode_off = series.mode_t, series.mode_off
+    sp_t, sp_v, sp_p = series.sp_t, series.sp_v, series.sp_p
+    vel_t, vel, pos = series.vel_t, series.vel, series.pos
+    # OFFBOARD stretches from the mode reports (a stretch ends at the first report out of it)
     segments = []
     t_origin = None
     starts = np.flatnonzero(mode_off & ~np.concatenate([[False], mode_off[:-1]]))
@@ -162,7 +215,7 @@ def load_response_log(path: str | Path, grid_s: float = GRID_S) -> ResponseLog:
         segments.append((t - t_origin, cmd, v_meas))
     if not segments:
         raise IdentifyError(f"{path}: no OFFBOARD stretch with setpoints and vehicle velocity (armed, main mode 6)")
-    return ResponseLog(segments, kinds)
+    return ResponseLog(segments, dict(series.kinds))
 
 
 # --------------------------------------------------------------------------- simulation
@@ -247,6 +300,22 @@ def fit_axis(data, dt: float = GRID_S, *, first_order: bool = False, horizon_s: 
     return model(best.x).canonical()
 
 
+def check_excitation(log: ResponseLog, min_step_mps: float = MIN_STEP_MPS) -> None:
+    """Refuse a log whose commands do not step by ``min_step_mps`` on each axis group.
+
+    Raises
+    ------
+    IdentifyError
+        Naming the axis group without a step and the largest step it has.
+    """
+    for name, axes in (("horizontal (north or east)", (0, 1)), ("vertical (down)", (2,))):
+        largest = max((float(np.ptp(cmd[:, k])) for _, cmd, _ in log.segments for k in axes), default=0.0)
+        if largest < min_step_mps:
+            raise IdentifyError(f"no velocity step of at least {min_step_mps:g} m/s on the {name} axis in OFFBOARD "
+                                f"(largest {largest:.2f} m/s): the response cannot be identified; fly the "
+                                f"identification steps (companion fly --identify)")
+
+
 @dataclass(frozen=True)
 class Identification:
     """The fitted responses and their figures of merit (m/s) beside a reference lag's."""
@@ -261,10 +330,22 @@ class Identification:
 def identify(log: ResponseLog, *, reference_lag_s: float = 0.3, horizon_s: float = 0.3) -> Identification:
     """Fit the horizontal and vertical responses of ``log``; compare with first-order lags.
 
+    Raises :class:`IdentifyError` when the log has no velocity step of :data:`MIN_STEP_MPS`
+    on an axis group (:func:`check_excitation`), or when ``horizon_s`` or ``reference_lag_s``
+    is outside its range. (A gain at its bound is not refused: a pure lag's response is
+    the same for any ``K_i`` whose zero cancels a pole, so the fit may leave it anywhere.)
+
     ``figures`` has rows ``'model'`` (the fit), ``'first-order fit'`` and
     ``f'lag {reference_lag_s} s'`` with ``fit_rms`` and ``one_step_rms`` for
     ``horizontal``, ``vertical`` and ``all`` (the rms over the three axes).
     """
+    lo, hi = HORIZON_RANGE_S
+    if not lo <= horizon_s <= hi:
+        raise IdentifyError(f"horizon_s = {horizon_s!r} must be from {lo:g} to {hi:g} s")
+    lo, hi = REFERENCE_LAG_RANGE_S
+    if not lo <= reference_lag_s <= hi:
+        raise IdentifyError(f"reference_lag_s = {reference_lag_s!r} must be from {lo:g} to {hi:g} s")
+    check_excitation(log)
     groups = {"horizontal": (0, 1), "vertical": (2,)}
     data = {name: _axis_data(log, axes) for name, axes in groups.items()}
     fitted = {name: fit_axis(d, horizon_s=horizon_s) for name, d in data.items()}

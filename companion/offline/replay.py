@@ -1,13 +1,16 @@
 """Replay a MAVLink tlog through the companion's estimator and planner, in log time.
 
-(About 450 lines: one job, rebuilding the recorded ticks and comparing the commands;
-the stand-ins for the live edge are in :mod:`companion.offline.replay_stand_ins`.)
+(About 700 lines: one job, rebuilding the recorded ticks and comparing the commands, in
+the steps :func:`replay` lists; the stand-ins for the live edge are in
+:mod:`companion.offline.replay_stand_ins`.)
 
 :func:`replay` reads a tlog (:func:`companion.mavlink.tlog.read_tlog`), feeds every *inbound*
 message (from any source other than the companion's own (system, component), by
 default (1, 191): the autopilot, obstacle systems, a ground station) to a fresh
-:class:`~companion.loop.app.Companion` and calls :meth:`~companion.loop.app.Companion.tick` at the
-link times at which the recorded companion ticked. It reads no clock: a replay takes as
+:class:`~companion.loop.app.Companion` and ticks it at the link times at which the recorded
+companion ticked, through the same :class:`~companion.loop.driver.Driver` as the live
+edges (its port, :class:`~companion.offline.replay_stand_ins.CollectingPort`, keeps what
+would be sent, to compare with the recording). It reads no clock: a replay takes as
 long as the computation, not the flight.
 
 Two kinds of log
@@ -24,12 +27,12 @@ ran late in real time) and after the last one up to the end of the log, each aft
 inbound records stamped up to its time. Each replayed setpoint is compared with the recorded one of the same tick.
 
 *Marked* (a log from ``companion fly``, whose real-time loop marks its tlog, see
-:mod:`companion.loop.tlog_marks`). Every tick is marked, those that sent nothing too, and
+:mod:`companion.realtime.tlog_marks`). Every tick is marked, those that sent nothing too, and
 every message that came on an obstacle link is marked with that link: the replay ticks
 exactly where the recording did and feeds each message on its own link, inferring
 nothing. Older logs without marks are replayed by the rules above; a real-time one then
 agrees only as far as its silent ticks fall on the grid (the loop's jitter moves them)
-and its links are guessed right (:func:`companion.loop.obstacles.replay_link`).
+and its links are guessed right (:func:`companion.loop.intake.obstacles.replay_link`).
 
 *What-if* (no companion packets: mavsim's own ``--tlog``, a MAVProxy or QGroundControl
 log). The companion ticks at its setpoint rate over the log's duration, and since no
@@ -54,12 +57,19 @@ the link's clock when each packet was sent (a few microseconds after the tick's 
 clock reading), so its replay agrees only to that timing.
 
 Plans in real time. ``companion fly`` plans in a process beside the stream, so a plan
-is applied at the tick that collects it, usually some ticks after its request; that tick
-carries a NAMED_VALUE_FLOAT ``plan_seq`` (:data:`companion.loop.app.PLAN_ARRIVED`), also
-when it is the request's own. A log with such
-announcements is replayed with :class:`~companion.offline.replay_stand_ins.RecordedArrivals`:
-each plan is solved when its arrival comes and applied at that tick, so a real-time log
-reproduces its commands exactly. Lockstep logs have none: plans apply at their request's tick.
+is applied at the tick that collects it, usually some ticks after its request; the tlog
+marks that tick (``plan_in``, also when it is the request's own; ``plan_lost`` for a job that
+came back without a plan; :mod:`companion.realtime.tlog_marks`). Logs from before those marks
+carry the same numbers as NAMED_VALUE_FLOAT ``plan_seq`` / ``plan_lost`` among the tick's
+packets, which the replay takes out of the tick before comparing. A log with either is
+replayed with :class:`~companion.offline.replay_stand_ins.RecordedArrivals`: each plan is
+solved when its arrival comes and applied at that tick, so a real-time log reproduces its
+commands exactly. Lockstep logs have none: plans apply at their request's tick.
+
+Signatures. Packets the links rejected for their signature never reach the tlog; the
+companion's count of them is marked (``sig_reject``) and handed to the replayed companion
+before the same tick. Logs from before that mark give it only in the companion's
+STATUSTEXT announcing it, which the replay then reads.
 
 Comparison. SET_POSITION_TARGET_LOCAL_NED carries float32 velocities, so the replayed
 velocities are rounded to float32 exactly as packing would before they are compared:
@@ -78,10 +88,14 @@ from pathlib import Path
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
+from companion.mavlink.autopilots import DIALECT
+
 from companion.mavlink import messages
 from companion.core.planner import Planner
-from companion.loop.app import PLAN_LOST, Companion
-from companion.offline.replay_stand_ins import AssumeEngaged, RecordedArrivals, arrivals, signatures_rejected
+from companion.loop.app import Companion
+from companion.loop.driver import Driver
+from companion.offline.replay_stand_ins import (AssumeEngaged, CollectingPort, RecordedArrivals, arrivals,
+                                                is_legacy_plan_note, signatures_rejected)
 from companion.loop.records import status_counts
 from companion.errors import CompanionError
 from companion.mavlink.link import DEFAULT_SOURCE_COMPONENT, DEFAULT_SOURCE_SYSTEM, Received
@@ -89,9 +103,10 @@ from companion.mavlink.offboard import OffboardConfig
 from companion.loop.config import load_scenario
 from companion.mavlink.tlog import read_tlog
 from companion.offline.harness import LOCKSTEP_EPOCH_S
-from companion.loop.obstacles import replay_link
-from companion.loop.tlog_marks import TICK, link_name, mark_of
-from companion.loop.traffic_config import AUTOPILOT_LINK
+from companion.loop.intake.obstacles import replay_link
+from companion.realtime.tlog_marks import (HAND_BACK, HAND_BACK_REASONS, LEGACY_PLAN_ARRIVED, LEGACY_PLAN_LOST, PLAN_IN,
+                                       PLAN_LOST, RX_LINK, SIGNATURES_REJECTED, TICK, link_name, mark_of)
+from companion.loop.intake.traffic_config import AUTOPILOT_LINK
 
 logger = logging.getLogger(__name__)
 
@@ -116,6 +131,7 @@ class ReplayResult:
         whether it was detected (or given) as the lockstep epoch.
     messages, inbound, outbound : valid messages read, fed to the companion, sent by it.
     duration_s : log time from the first to the last record (s).
+    start_s : link time of the first record (s); the summary's times count from it.
     ticks : ticks replayed (recorded ones plus the silent ones put back on the grid).
     recorded_ticks : ticks rebuilt from the outbound records.
     commands_recorded : recorded SET_POSITION_TARGET_LOCAL_NED.
@@ -144,6 +160,7 @@ class ReplayResult:
     inbound: int
     outbound: int
     duration_s: float
+    start_s: float
     ticks: int
     recorded_ticks: int
     commands_recorded: int
@@ -165,8 +182,13 @@ class ReplayResult:
         return len(self.companion.records)
 
     def summary(self) -> dict:
-        """JSON-serialisable numbers (what ``companion replay --json`` prints)."""
+        """JSON-serialisable numbers (what ``companion replay --json`` prints); times (s) count
+        from the log's first record (``start_link_s``), not from the link clock's epoch."""
         state = self.companion.state
+
+        def since_start(t: float | None) -> float | None:
+            return None if t is None else round(t - self.start_s, 6)
+
         return {
             "tlog": str(self.path),
             "scenario": str(self.scenario_path),
@@ -177,6 +199,7 @@ class ReplayResult:
             "inbound": self.inbound,
             "outbound": self.outbound,
             "log_duration_s": round(self.duration_s, 6),
+            "start_link_s": self.start_s,
             "ticks": self.ticks,
             "recorded_ticks": self.recorded_ticks,
             "replans": self.replans,
@@ -187,16 +210,16 @@ class ReplayResult:
             "unmatched_commands": self.unmatched_commands,
             "tick_mismatches": self.tick_mismatches,
             "max_abs_diff_mps": self.max_abs_diff_mps,
-            "max_diff_t_s": self.max_diff_t_s,
+            "max_diff_t_s": since_start(self.max_diff_t_s),
             "max_diff_index": self.max_diff_index,
             "max_commanded_speed_mps": float(np.max(np.linalg.norm(self.commands_mps, axis=1))) if self.commands_mps.size else None,
-            "goal_reached_t_s": state.goal_reached_t_s,
+            "goal_reached_t_s": since_start(state.goal_reached_t_s),
             "braking_events": state.braking_events,
             "stale_events": state.stale_events,
             "messages_rejected": state.messages_rejected,
             "tracks": len(self.companion.tracker),
             "tracking_error": state.tracking.summary(),
-            "events": [(round(t, 3), text) for t, text in state.events],
+            "events": [(round(t - self.start_s, 3), text) for t, text in state.events],
             "notes": list(self.notes),
         }
 
@@ -214,7 +237,22 @@ class _Rec:
 
 @dataclass
 class _TickMark:
-    t_us: int  # a tick the recording marked (companion.loop.tlog_marks.TICK)
+    t_us: int  # a tick the recording marked (companion.realtime.tlog_marks.TICK)
+    arrived: list = field(default_factory=list)  # replan numbers marked PLAN_IN at this tick
+    lost: list = field(default_factory=list)     # replan numbers marked PLAN_LOST at this tick
+    signatures: int | None = None                # the links' count marked SIGNATURES_REJECTED before this tick
+    hand_back: str | None = None                 # asked from outside after this tick, for this reason (HAND_BACK)
+
+    def note(self, name: str, value: int) -> None:
+        """A mark that belongs to this tick (written after its TICK mark)."""
+        if name == PLAN_IN:
+            self.arrived.append(value)
+        elif name == PLAN_LOST:
+            self.lost.append(value)
+        elif name == SIGNATURES_REJECTED:
+            self.signatures = value
+        elif name == HAND_BACK:
+            self.hand_back = HAND_BACK_REASONS[value] if 0 <= value < len(HAND_BACK_REASONS) else HAND_BACK_REASONS[0]
 
 
 @dataclass
@@ -222,6 +260,10 @@ class _Tick:
     t_us: int
     recorded: list = field(default_factory=list)  # recorded outbound messages ([] for a silent tick)
     silent: bool = False
+    arrived: list = field(default_factory=list)  # replans whose plan the recording collected at this tick
+    lost: list = field(default_factory=list)     # replans that came back without a plan at this tick
+    signatures: int | None = None                # the links' rejected-signature count before this tick
+    hand_back: str | None = None                 # a hand-back asked from outside after this tick (its reason)
 
     @property
     def setpoint(self):
@@ -270,9 +312,17 @@ def replay(
     companion_key: tuple[int, int] = (DEFAULT_SOURCE_SYSTEM, DEFAULT_SOURCE_COMPONENT),
     assume_engaged: bool | None = None,
     offboard: OffboardConfig | None = None,
+    after_tick=None,
+    companion_keywords: dict | None = None,
     **planner_overrides,
 ) -> ReplayResult:
     """Replay a tlog through a fresh companion and compare with its recorded commands.
+
+    The steps: read the log, align its clock with link time (:func:`_align_clocks`), parse
+    it into inbound records, outbound records and marks (:func:`_parse`), schedule the
+    ticks among the inbound records (:func:`_schedule_ticks`), run a fresh companion
+    through them (:func:`_run`), compare what it sent with the recording (:func:`_compare`)
+    and report (:func:`_report`).
 
     Parameters
     ----------
@@ -284,6 +334,9 @@ def replay(
     assume_engaged : replace the offboard sequence with :class:`AssumeEngaged`; None does
         so exactly when the log holds no companion setpoint (what-if mode).
     offboard : engagement settings the recorded companion used (default: the scenario's).
+    after_tick : ``after_tick(companion, t_s, outbox)`` after every replayed tick (a view, :mod:`companion.view`).
+    companion_keywords : more :class:`Companion` keywords the recorded run was built with
+        (a ``goal`` and its ``reference`` for ``--goal`` / ``--mission``).
     **planner_overrides : ``[planner]`` overrides the recorded run used (``formulation`` ...).
 
     Returns
@@ -302,8 +355,81 @@ def replay(
     path = Path(tlog_path)
     records = list(read_tlog(path))  # raises TlogError first: a bad log is the likelier mistake
     scenario = load_scenario(scenario_path, **planner_overrides)
-    first_s, last_s = records[0][0], records[-1][0]
+    time_offset_s, lockstep = _align_clocks(records[0][0], time_offset_s)
+    parsed = _parse(path, records, int(round(time_offset_s * _US)), companion_key)
+    period_us = int(round(_US / scenario.companion.setpoint_rate_hz))  # as the harness advances mavsim: round(dt * 1e6)
+    timeline = _schedule_ticks(parsed.stream, period_us)
 
+    mode = "compare" if timeline.commands_recorded else "what-if"
+    if assume_engaged is None:
+        assume_engaged = mode == "what-if"
+    notes = []
+    if timeline.marked:
+        notes.append("ticks and links as the recording marked them (companion.realtime.tlog_marks)")
+    elif mode == "compare" and not lockstep:
+        notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
+    schedule = RecordedArrivals(Planner(scenario.planner)) if timeline.realtime_plans else None
+    if timeline.legacy_plans:
+        notes.append("plans applied at the ticks the recording announced their arrival on the wire "
+                     "(NAMED_VALUE_FLOAT plan_seq: a log from before the plan marks; real-time planning)")
+    elif timeline.realtime_plans:
+        notes.append("plans applied at the ticks the recording marked their arrival (real-time planning)")
+    companion = Companion(scenario, offboard=offboard, sequencer=AssumeEngaged() if assume_engaged else None,
+                          planning=schedule, **(companion_keywords or {}))
+    if assume_engaged:
+        notes.append("offboard sequence assumed engaged from the first autopilot HEARTBEAT (what-if)")
+
+    ticked = _run(companion, timeline, schedule, after_tick)
+    comparison = _compare(ticked, mode)
+    if schedule is not None and schedule.missing:
+        notes.append(f"{schedule.missing} announced plan arrivals had no matching replan request (the log and the scenario disagree)")
+    return _report(path, Path(scenario_path), records, parsed, timeline, comparison, companion,
+                   mode=mode, time_offset_s=time_offset_s, lockstep=lockstep, notes=notes)
+
+
+# --------------------------------------------------------------------------- the steps
+
+
+@dataclass
+class _Parsed:
+    """A log split into what the companion received and sent, with the recording's marks."""
+
+    stream: list   # (outbound, _Rec | _TickMark) in log order
+    inbound: int   # records fed to the companion
+    outbound: int  # records the companion sent
+
+
+@dataclass
+class _Timeline:
+    """Inbound records and ticks in the order the recorded companion saw them."""
+
+    events: list                # _Rec (fed to handle) and _Tick (a tick)
+    marked: bool                # the recording marked its ticks (companion.realtime.tlog_marks)
+    legacy_plans: bool          # plan arrivals were sent on the wire (a log from before the plan marks)
+    recorded_ticks: int         # ticks rebuilt from the outbound records
+    commands_recorded: int      # recorded setpoints
+
+    @property
+    def realtime_plans(self) -> bool:
+        """Plans arrived at ticks of their own (real-time planning): replay them there."""
+        return any(ev.arrived or ev.lost for ev in self.events if isinstance(ev, _Tick))
+
+
+@dataclass
+class _Comparison:
+    """The replayed setpoints against the recorded ones."""
+
+    ticks: int
+    times: list
+    commands: list
+    recorded: list
+    diffs: list          # (max abs diff over axes, t_s) per compared setpoint
+    unmatched: int
+    mismatches: int
+
+
+def _align_clocks(first_s: float, time_offset_s: float | None) -> tuple[float, bool]:
+    """The offset (s) from tlog stamps to link time, and whether the log is a lockstep one."""
     lockstep = time_offset_s is None and LOCKSTEP_EPOCH_S <= first_s < LOCKSTEP_EPOCH_S + _LOCKSTEP_WINDOW_S
     if time_offset_s is None:
         time_offset_s = LOCKSTEP_EPOCH_S if lockstep else 0.0
@@ -311,25 +437,36 @@ def replay(
         lockstep = float(time_offset_s) == LOCKSTEP_EPOCH_S
     if not math.isfinite(time_offset_s):
         raise ReplayError(f"time_offset_s must be finite seconds, got {time_offset_s!r}")
-    offset_us = int(round(float(time_offset_s) * _US))
+    return float(time_offset_s), lockstep
 
-    parser = mavlink2.MAVLink(None, *companion_key)
+
+def _parse(path: Path, records: list, offset_us: int, companion_key: tuple[int, int]) -> _Parsed:
+    """Inbound and outbound records in log order, each in link time (integer us), the marks
+    taken out (a tick mark stays as a :class:`_TickMark` carrying its plan and signature
+    marks; a link mark goes to the next inbound record). Raises :class:`ReplayError` when
+    no autopilot is among the inbound messages."""
+    parser = DIALECT.MAVLink(None, *companion_key)
     parser.robust_parsing = True
     key = tuple(int(k) for k in companion_key)
-    stream: list[tuple[bool, _Rec]] = []
+    stream: list[tuple[bool, _Rec | _TickMark]] = []
     n_in = n_out = 0
     next_link: str | None = None
+    last_tick: _TickMark | None = None
     for t_s, msg in records:
         raw = bytes(msg.get_msgbuf())
         # mavutil stores stamp_us * 1e-6; rounding back recovers the integer exactly.
         rec = _Rec(int(round(t_s * _US)) - offset_us, _reparse(parser, raw, msg), raw)
         out = messages.source_key(rec.msg) == key
         mark = mark_of(rec.msg) if out else None
-        if mark is not None:  # the recording's own notes (tlog_marks), never sent: a tick, or the next record's link
-            if mark[0] == TICK:
-                stream.append((True, _TickMark(rec.t_us)))
-            else:
-                next_link = link_name(mark[1])
+        if mark is not None:  # the recording's own notes (tlog_marks), never sent
+            name, value = mark
+            if name == TICK:
+                last_tick = _TickMark(rec.t_us)
+                stream.append((True, last_tick))
+            elif name == RX_LINK:  # the next record's link
+                next_link = link_name(value)
+            elif last_tick is not None:  # plans and signatures of the tick just marked
+                last_tick.note(name, value)
             continue
         if out and _is_clock_answer(rec.msg):
             n_out += 1
@@ -346,47 +483,58 @@ def replay(
             f"{path}: no vehicle in the log: no PX4 autopilot HEARTBEAT (component 1, autopilot 12) among "
             f"{len(inbound)} inbound messages" + (f"; heartbeats only from {sources}" if sources else "; no HEARTBEAT at all")
         )
+    return _Parsed(stream, n_in, n_out)
 
-    period_us = int(round(_US / scenario.loop.setpoint_rate_hz))  # as the harness advances mavsim: round(dt * 1e6)
+
+def _schedule_ticks(stream: list, period_us: int) -> _Timeline:
+    """The ticks among the inbound records: as marked, or rebuilt from the outbound records
+    (:func:`_marked_schedule`, :func:`_schedule`); an old log's plan notes taken out of them."""
     marked = any(isinstance(rec, _TickMark) for _, rec in stream)
     events = _marked_schedule(stream) if marked else _schedule(stream, period_us)
-    recorded_ticks = sum(1 for ev in events if isinstance(ev, _Tick) and not ev.silent)
-    commands_recorded = sum(1 for ev in events if isinstance(ev, _Tick) and ev.setpoint is not None)
-    mode = "compare" if commands_recorded else "what-if"
-    if assume_engaged is None:
-        assume_engaged = mode == "what-if"
-    notes = []
-    if marked:
-        notes.append("ticks and links as the recording marked them (companion.loop.tlog_marks)")
-    elif mode == "compare" and not lockstep:
-        notes.append("real-time log: ticks are timed by their first packet's stamp (exact for logs from companion fly, which stamps packets with the tick time on a microsecond clock)")
+    legacy_plans = _take_legacy_notes(events)
+    return _Timeline(
+        events=events,
+        marked=marked,
+        legacy_plans=legacy_plans,
+        recorded_ticks=sum(1 for ev in events if isinstance(ev, _Tick) and not ev.silent),
+        commands_recorded=sum(1 for ev in events if isinstance(ev, _Tick) and ev.setpoint is not None),
+    )
 
-    realtime_plans = any(arrivals(ev.recorded) or arrivals(ev.recorded, PLAN_LOST) for ev in events if isinstance(ev, _Tick))
-    schedule = RecordedArrivals(Planner(scenario.planner)) if realtime_plans else None
-    if realtime_plans:
-        notes.append("plans applied at the ticks the recording announced their arrival (real-time planning)")
-    companion = Companion(scenario, offboard=offboard, sequencer=AssumeEngaged() if assume_engaged else None,
-                          planning=schedule)
-    if assume_engaged:
-        notes.append("offboard sequence assumed engaged from the first autopilot HEARTBEAT (what-if)")
 
+def _run(companion: Companion, timeline: _Timeline, schedule: RecordedArrivals | None, after_tick=None) -> list:
+    """Drive ``companion`` (:class:`~companion.loop.driver.Driver`) through the inbound records and the
+    ticks, as the recording did; each tick with what it sent (what the port collected during it);
+    ``after_tick(companion, t_s, sent)`` after each (a view or a recording)."""
+    port = CollectingPort()
+    driver = Driver(companion, port)
+    ticked: list[tuple[_Tick, list]] = []
+    for ev in timeline.events:
+        if isinstance(ev, _Rec):
+            link = (ev.link or AUTOPILOT_LINK) if timeline.marked else replay_link(ev.msg, companion.autopilot)
+            driver.receive(Received(ev.t_us * 1e-6, ev.msg, ev.raw, link))
+            continue
+        if schedule is not None:
+            schedule.arrivals = list(ev.arrived)
+            schedule.lost = list(ev.lost)
+        port.take()  # the TIMESYNC answers since the last tick: not compared (_parse left the recorded ones out)
+        # the signature count the recording's links had (a dropped packet is not in a tlog); None: not marked
+        driver.tick(ev.t_us * 1e-6, ev.signatures)
+        ticked.append((ev, port.take()))
+        if after_tick is not None:
+            after_tick(companion, ev.t_us * 1e-6, ticked[-1][1])
+        if ev.hand_back is not None:  # after the tick, as the recording's edge asked it
+            driver.hand_back(ev.t_us * 1e-6, ev.hand_back)
+    return ticked
+
+
+def _compare(ticked: list, mode: str) -> _Comparison:
+    """Each replayed tick against the recorded one: message types, and the setpoint's velocity
+    as the wire carries it."""
     times, cmds, recs = [], [], []
     diffs: list[tuple[float, float]] = []  # (max abs diff, t_s)
-    unmatched = mismatches = ticks = 0
-    for ev in events:
-        if isinstance(ev, _Rec):
-            link = (ev.link or AUTOPILOT_LINK) if marked else replay_link(ev.msg, companion.autopilot)
-            companion.handle(Received(ev.t_us * 1e-6, ev.msg, ev.raw, link))
-            continue
+    unmatched = mismatches = 0
+    for ev, out in ticked:
         t = ev.t_us * 1e-6
-        if schedule is not None:
-            schedule.arrivals = arrivals(ev.recorded)
-            schedule.lost = arrivals(ev.recorded, PLAN_LOST)
-        rejected = signatures_rejected(ev.recorded)
-        if rejected is not None:  # what the recording's links counted (dropped packets are not in a tlog)
-            companion.on_signatures_rejected(rejected)
-        out = companion.tick(t)
-        ticks += 1
         sp = next((m for m in reversed(out) if m.get_type() == _SETPOINT), None)
         if ev.silent:
             if mode == "compare":  # the recorded companion sent nothing at this tick
@@ -410,44 +558,49 @@ def replay(
                 unmatched += 1
         elif rec_sp is not None:
             unmatched += 1
+    return _Comparison(len(ticked), times, cmds, recs, diffs, unmatched, mismatches)
 
+
+def _report(path: Path, scenario_path: Path, records: list, parsed: _Parsed, timeline: _Timeline,
+            comparison: _Comparison, companion: Companion, *, mode: str, time_offset_s: float, lockstep: bool,
+            notes: list) -> ReplayResult:
+    """The :class:`ReplayResult` (and its log line)."""
+    diffs = comparison.diffs
     if diffs:
         i_max = int(np.argmax([d for d, _ in diffs]))
         max_diff, max_t = diffs[i_max]
     else:
         i_max, max_diff, max_t = None, None, None
-    if schedule is not None and schedule.missing:
-        notes.append(f"{schedule.missing} announced plan arrivals had no matching replan request (the log and the scenario disagree)")
-    statuses = status_counts(r.status for r in companion.records)
     result = ReplayResult(
         path=path,
-        scenario_path=Path(scenario_path),
+        scenario_path=scenario_path,
         mode=mode,
-        time_offset_s=float(time_offset_s),
+        time_offset_s=time_offset_s,
         lockstep=lockstep,
         messages=len(records),
-        inbound=n_in,
-        outbound=n_out,
-        duration_s=float(last_s - first_s),
-        ticks=ticks,
-        recorded_ticks=recorded_ticks,
-        commands_recorded=commands_recorded,
+        inbound=parsed.inbound,
+        outbound=parsed.outbound,
+        duration_s=float(records[-1][0] - records[0][0]),
+        start_s=float(records[0][0] - time_offset_s),
+        ticks=comparison.ticks,
+        recorded_ticks=timeline.recorded_ticks,
+        commands_recorded=timeline.commands_recorded,
         commands_compared=len(diffs),
-        unmatched_commands=unmatched,
-        tick_mismatches=mismatches,
+        unmatched_commands=comparison.unmatched,
+        tick_mismatches=comparison.mismatches,
         max_abs_diff_mps=max_diff,
         max_diff_t_s=max_t,
         max_diff_index=i_max,
-        command_times_s=np.array(times, dtype=float),
-        commands_mps=np.array(cmds, dtype=float).reshape(-1, 3),
-        recorded_commands_mps=np.array(recs, dtype=float).reshape(-1, 3),
-        status_counts=statuses,
+        command_times_s=np.array(comparison.times, dtype=float),
+        commands_mps=np.array(comparison.commands, dtype=float).reshape(-1, 3),
+        recorded_commands_mps=np.array(comparison.recorded, dtype=float).reshape(-1, 3),
+        status_counts=status_counts(r.status for r in companion.records),
         companion=companion,
         notes=notes,
     )
     logger.info(
         "replayed %s (%s): %d messages, %d ticks, %d replans, %d commands compared, max diff %s m/s",
-        path, mode, result.messages, ticks, result.replans, result.commands_compared, max_diff,
+        path, mode, result.messages, result.ticks, result.replans, result.commands_compared, max_diff,
     )
     return result
 
@@ -460,6 +613,29 @@ def _is_clock_answer(msg) -> bool:
     return isinstance(sync, messages.TimeSync) and not sync.is_request
 
 
+def _take_legacy_notes(events: list) -> bool:
+    """Take an old log's bookkeeping out of its ticks; whether it had plan notes on the wire.
+
+    Before the plan and signature marks (:mod:`companion.realtime.tlog_marks`) the companion sent
+    NAMED_VALUE_FLOAT ``plan_seq`` / ``plan_lost`` among a tick's packets: they become the tick's
+    arrivals and losses and leave its recorded messages (today's companion sends none, so
+    they are not compared). Without any signature mark in the log, the count is read from
+    the companion's STATUSTEXT announcing it (which stays: it is compared).
+    """
+    ticks = [ev for ev in events if isinstance(ev, _Tick)]
+    sig_marked = any(t.signatures is not None for t in ticks)
+    legacy = False
+    for tick in ticks:
+        if any(is_legacy_plan_note(m) for m in tick.recorded):
+            legacy = True
+            tick.arrived.extend(arrivals(tick.recorded, LEGACY_PLAN_ARRIVED))
+            tick.lost.extend(arrivals(tick.recorded, LEGACY_PLAN_LOST))
+            tick.recorded = [m for m in tick.recorded if not is_legacy_plan_note(m)]
+        if not sig_marked:
+            tick.signatures = signatures_rejected(tick.recorded)
+    return legacy
+
+
 def _marked_schedule(stream: list) -> list:
     """Inbound records and ticks of a log with tick marks: exactly in the recorded order.
 
@@ -470,7 +646,8 @@ def _marked_schedule(stream: list) -> list:
     cur: _Tick | None = None
     for out, rec in stream:
         if isinstance(rec, _TickMark):
-            cur = _Tick(rec.t_us)
+            cur = _Tick(rec.t_us, arrived=list(rec.arrived), lost=list(rec.lost), signatures=rec.signatures,
+                        hand_back=rec.hand_back)
             events.append(cur)
         elif not out:
             cur = None

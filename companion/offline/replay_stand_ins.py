@@ -1,10 +1,12 @@
-"""Stand-ins for the live edge in a replay: the offboard sequence and the planning service.
+"""Stand-ins for the live edge in a replay: the offboard sequence, the planning service and the port.
 
-A replay feeds a fresh :class:`~companion.loop.app.Companion` the logged messages at the
-logged ticks; what it cannot replay from the log it is given through the Companion's
-seams: :class:`AssumeEngaged` (the sequencer of a what-if replay, where no companion
-asked for OFFBOARD) and :class:`RecordedArrivals` (the planning service of a replay of
-a real-time log, where plans arrived some ticks after their requests).
+A replay drives a fresh :class:`~companion.loop.app.Companion` through the same
+:class:`~companion.loop.driver.Driver` as the live edges, feeding it the logged messages at
+the logged ticks; what it cannot replay from the log it is given through the Companion's
+and the driver's seams: :class:`AssumeEngaged` (the sequencer of a what-if replay, where no
+companion asked for OFFBOARD), :class:`RecordedArrivals` (the planning service of a replay
+of a real-time log, where plans arrived some ticks after their requests) and
+:class:`CollectingPort` (the driver's port: what would be sent, kept to compare with the log).
 """
 
 from __future__ import annotations
@@ -12,11 +14,12 @@ from __future__ import annotations
 import logging
 
 from companion.core.planner import Planner
-from companion.loop.app import PLAN_ARRIVED, PLAN_LOST, SIGNATURE_TEXT
 from companion.loop.planning import PlanResult
+from companion.loop.supervisor import SIGNATURE_TEXT
+from companion.realtime.tlog_marks import LEGACY_PLAN_ARRIVED, LEGACY_PLAN_LOST
 from companion.loop.request_builder import ReplanJob
 from companion.mavlink import messages
-from companion.mavlink.offboard import Phase, SequencerState
+from companion.mavlink.offboard import OffboardConfig, Phase, SequencerState
 
 logger = logging.getLogger(__name__)
 
@@ -46,8 +49,30 @@ class AssumeEngaged:
     def on_home_altitude(self, alt_amsl_m: float) -> None:
         """Ignored."""
 
+    def on_home_local_z(self, local_z_m: float) -> None:
+        """Ignored."""
+
+    def on_estimator_status(self, t_s: float, flags: int) -> None:
+        """Ignored."""
+
+    def on_vehicle_position(self, t_s: float, z_ned_m: float, vz_ned_mps) -> None:
+        """Ignored."""
+
+    @property
+    def kind(self):
+        """None: a what-if never hands back."""
+        return None
+
+    @property
+    def config(self) -> OffboardConfig:
+        return OffboardConfig()
+
     def on_goal_reached(self, t_s: float) -> None:
         """Ignored."""
+
+    def hand_back(self, t_s: float, reason: str) -> bool:
+        """Nothing to hand back: a what-if never commands the vehicle (False)."""
+        return False
 
     def step(self, t_s: float) -> list:
         return []
@@ -73,20 +98,21 @@ class RecordedArrivals:
     """The :class:`~companion.loop.planning.PlanningService` of a replay of a real-time log.
 
     In real time a plan arrives some ticks after its request (or, when the solve beats the
-    stream, in the tick of its request), and ``companion fly`` announces every arrival
-    (NAMED_VALUE_FLOAT :data:`~companion.loop.app.PLAN_ARRIVED`, the replan's number). The
-    replay sets :attr:`arrivals` from the recorded tick before each tick; a job is solved
-    when its arrival comes, so the replayed planner solves the same jobs in the same order
-    as the recorded one (its warm starts match) and its plan is applied at the same tick.
-    Jobs the recording never solved (superseded, in logs from before requests waited for a
-    free planner) are dropped; a job the recorded planner raised on (NAMED_VALUE_FLOAT
-    :data:`~companion.loop.app.PLAN_LOST`, set in :attr:`lost`) is handed back without a plan
-    at its recorded tick. The service is :attr:`busy` from a request until its recorded
+    stream, in the tick of its request), and ``companion fly`` marks every arrival in its
+    tlog (:data:`~companion.realtime.tlog_marks.PLAN_IN`, the replan's number; logs from before
+    the marks carry a NAMED_VALUE_FLOAT :data:`~companion.realtime.tlog_marks.LEGACY_PLAN_ARRIVED`
+    instead). The replay sets :attr:`arrivals` from the recorded tick before each tick; a job
+    is solved when its arrival comes, so the replayed planner solves the same jobs in the
+    same order as the recorded one (its warm starts match) and its plan is applied at the
+    same tick. Jobs the recording never solved (superseded, in logs from before requests
+    waited for a free planner) are dropped; a job the recorded planner raised on
+    (:data:`~companion.realtime.tlog_marks.PLAN_LOST`, set in :attr:`lost`) is handed back without
+    a plan at its recorded tick. The service is :attr:`busy` from a request until its recorded
     arrival or loss, as the recorded planning process was, so the replayed loop builds its
     requests at the recorded ticks.
     """
 
-    asynchronous = True  #: announces its arrivals as the recorded planning service did
+    asynchronous = True  #: keeps its arrivals as the recorded planning service did
 
     def __init__(self, planner: Planner) -> None:
         self.planner = planner
@@ -124,11 +150,32 @@ class RecordedArrivals:
         return done
 
 
+class CollectingPort:
+    """The :class:`~companion.loop.driver.Port` of a replay: keeps what would be sent, sends nothing.
+
+    :attr:`sent` holds the messages since the last :meth:`take`, in send order (the TIMESYNC
+    answers of handled messages too); a replay takes a tick's messages as those sent during it.
+    """
+
+    def __init__(self) -> None:
+        self.sent: list = []
+
+    def take(self) -> list:
+        """The messages kept since the last call, in send order."""
+        out, self.sent = self.sent, []
+        return out
+
+    def send(self, msg, t_s: float) -> None:
+        """Keep ``msg`` (link time ``t_s``, s, is the tick's or the answered message's; not needed). Nothing is packed."""
+        self.sent.append(msg)
+
+
 def signatures_rejected(recorded: list) -> int | None:
     """The links' count of rejected signatures announced among a recorded tick's messages, if any.
 
-    A packet dropped for its signature never reaches the tlog, so the replay learns the
-    count from the companion's own announcement (:data:`companion.loop.app.SIGNATURE_TEXT`).
+    For logs from before the signature-count mark (:data:`companion.realtime.tlog_marks.SIGNATURES_REJECTED`):
+    a packet dropped for its signature never reaches the tlog, so the replay learns the count
+    from the companion's own announcement (:data:`companion.loop.supervisor.SIGNATURE_TEXT`).
     """
     for m in recorded:
         if m.get_type() == "STATUSTEXT":
@@ -140,8 +187,15 @@ def signatures_rejected(recorded: list) -> int | None:
     return None
 
 
-def arrivals(recorded: list, name: str = PLAN_ARRIVED) -> list[int]:
-    """Replan numbers announced as arrived (or, with ``name=PLAN_LOST``, lost) among a recorded tick's messages."""
+def is_legacy_plan_note(msg) -> bool:
+    """Whether ``msg`` is an old log's plan bookkeeping sent on the wire (NAMED_VALUE_FLOAT
+    :data:`~companion.realtime.tlog_marks.LEGACY_PLAN_ARRIVED` or ``LEGACY_PLAN_LOST``)."""
+    return msg.get_type() == "NAMED_VALUE_FLOAT" and str(msg.name).rstrip("\x00") in (LEGACY_PLAN_ARRIVED, LEGACY_PLAN_LOST)
+
+
+def arrivals(recorded: list, name: str = LEGACY_PLAN_ARRIVED) -> list[int]:
+    """Replan numbers an old log's tick announced as arrived (or, with ``name=LEGACY_PLAN_LOST``,
+    lost) among its recorded messages (NAMED_VALUE_FLOAT)."""
     return [
         int(m.value) for m in recorded
         if m.get_type() == "NAMED_VALUE_FLOAT" and str(m.name).rstrip("\x00") == name

@@ -9,7 +9,9 @@ import numpy as np
 from companion.loop.app import Companion
 from companion.loop.records import describe_tracking, status_counts
 
-_FAILSAFE_WORDS = ("braking", "stale", "PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP", "slack used")
+#: What makes an event an alert: the companion braked (stale estimate, no valid plan, a plan
+#: too old), used safety slack, or lost control of the vehicle (pilot, link, gave up).
+_ALERT_WORDS = ("braking", "stale", "PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP", "slack used")
 
 
 def companion_report(companion: Companion) -> dict:
@@ -25,13 +27,15 @@ def companion_report(companion: Companion) -> dict:
     planned = [r.planned_min_contour for r in records if math.isfinite(r.planned_min_contour)]
     statuses = status_counts(r.status for r in records)
     state = companion.state
-    return {
-        "formulation": companion.cfg.formulation,
-        "c_min": companion.cfg.c_min,
-        "c_max": companion.cfg.c_max,
+    report = {
+        "formulation": companion.planner_config.formulation,
+        "c_min": companion.planner_config.c_min,
+        "c_max": companion.planner_config.c_max,
         "engaged": companion.sequencer.state.engaged,
         "phase": companion.sequencer.phase.name,
         "goal_reached_companion_t_s": state.goal_reached_t_s,
+        "min_estimated_clearance_m": state.min_track_clearance_m,
+        "vehicle_mode": getattr(companion.sequencer, "vehicle_mode", None),
         "replans": len(records),
         "plan_status": statuses,
         "replans_with_slack": state.slack_plans,
@@ -42,6 +46,8 @@ def companion_report(companion: Companion) -> dict:
         "solve_time_p99_ms": float(np.percentile(solve, 99) * 1e3) if solve.size else None,
         "stale_events": state.stale_events,
         "old_plan_events": state.old_plan_events,
+        "estimator_resets": state.estimator_resets,
+        "plans_before_reset": state.plans_before_reset,
         "tracks_unconstrained_max": state.tracks_unconstrained_max,
         "tracks_beyond_walls_max": state.tracks_beyond_walls_max,
         "messages_rejected": state.messages_rejected,
@@ -51,9 +57,18 @@ def companion_report(companion: Companion) -> dict:
         "vehicle_clock": companion.perception.clock.summary(),
         "tracking_error": state.tracking.summary(),
         "drift_max_mps": [round(v, 4) for v in state.drift_max_mps],
-        "failsafe_events": [(round(t, 2), text) for t, text in state.events if any(w in text for w in _FAILSAFE_WORDS)],
+        # the events an operator must look at (braking, slack, lost control); not the autopilot's failsafes
+        "alerts": [(round(t, 2), text) for t, text in state.events if any(w in text for w in _ALERT_WORDS)],
         "events": [(round(t, 2), text) for t, text in state.events],
     }
+    mission = getattr(companion.goal, "summary", None)   # a mission goal: the items reached
+    if callable(mission):
+        report.update(mission())
+    if getattr(companion, "goal_error", None):
+        report["goal_error"] = companion.goal_error
+    if getattr(companion, "fence", None) is not None:   # a geofence was flown: how far inside it the estimate kept
+        report["min_fence_clearance_m"] = state.min_fence_clearance_m
+    return report
 
 
 def truth_report(truth: dict) -> dict:
@@ -92,6 +107,12 @@ def _fmt(value: object) -> str:
 def format_report(report: dict) -> str:
     """A short human-readable summary (one 'key: value' line each; events listed last)."""
     order = [
+        ("outcome", "outcome"),
+        ("stop_requested_by", "stop requested by"),
+        ("goal_reached_companion_t_s", "goal reached at [s] (companion's estimate)"),
+        ("min_estimated_clearance_m", "smallest clearance to a track, estimated [m]"),
+        ("min_fence_clearance_m", "smallest distance inside the fence, est. [m]"),
+        ("vehicle_mode", "autopilot's last mode"),
         ("scenario", "scenario"),
         ("formulation", "formulation"),
         ("c_min", "c_min"),
@@ -132,9 +153,11 @@ def format_report(report: dict) -> str:
         lines.append(f"{'obstacle reports accepted'.ljust(width)}  {sum(intake['accepted'].values())} from {len(intake['accepted'])} sources")
         lines.append(f"{'obstacle reports rejected'.ljust(width)}  {intake['rejected_total']}")
         lines.extend(f"  {n:6d}  {why}" for why, n in intake["rejected"].items())
+        if intake.get("waiting_total"):  # before the vehicle clock or the origin was known: early, not wrong
+            lines.append(f"{'obstacle reports before the time base'.ljust(width)}  {intake['waiting_total']}")
         lines.extend(f"  warning: {w}" for w in intake["warnings"])
-    fs = report.get("failsafe_events") or []
-    lines.append(f"{'failsafe events'.ljust(width)}  {len(fs)}")
+    fs = report.get("alerts") or []
+    lines.append(f"{'alerts (braking, slack, lost control)'.ljust(width)}  {len(fs)}")
     for t, text in fs:
         lines.append(f"  t={t:7.2f} s  {text}")
     return "\n".join(lines)

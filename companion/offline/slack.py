@@ -90,6 +90,6 @@ def slack_report(records: Iterable[Any], c_min: float, radius_sum_m: float, sens
 
 def companion_slack_report(companion: Any) -> SlackReport:
     """:func:`slack_report` of a :class:`~companion.loop.app.Companion` after a run, with its own settings."""
-    cfg = companion.cfg
-    return slack_report(companion.records, cfg.c_min, cfg.drone_radius_m + companion.loop.obstacle_radius_m,
+    cfg = companion.planner_config
+    return slack_report(companion.records, cfg.c_min, cfg.drone_radius_m + companion.settings.obstacle_radius_m,
                         cfg.sensing_range_m)

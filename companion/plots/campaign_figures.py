@@ -58,7 +58,7 @@ def plot_campaign(summary: Mapping[str, Any], directory: str | Path, *, c_min: f
     ax.set_xticks(x, methods)
     ax.set_ylabel("episodes with a collision")
     ax.set_ylim(0.0, max(0.05, float(ci[:, 1].max()) * 1.2))
-    ax.set_title(f"{title}: collision rate by method")
+    ax.set_title(f"{title}\ncollision rate by method", fontsize=9)
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
     path = directory / "collision_rate.png"
@@ -81,7 +81,7 @@ def plot_campaign(summary: Mapping[str, Any], directory: str | Path, *, c_min: f
     ax.set_xlim(0.0, 1.02)
     ax.set_xlabel("smallest realised contour of touch in the episode")
     ax.set_ylabel("share of episodes (ECDF)")
-    ax.set_title(f"{title}: smallest contour of touch")
+    ax.set_title(f"{title}\nsmallest contour of touch", fontsize=9)
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
     path = directory / "min_contour_ecdf.png"

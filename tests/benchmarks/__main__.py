@@ -34,6 +34,9 @@ SUMMARY = (
     ("overlap", "max relative eta difference vs brentq"),
     ("estimator", "tracker cycle: update 10 tracks + predict all N=40 (median)"),
     ("campaign", "core-seconds per antipodal campaign episode (hyperplane)"),
+    ("startup", "companion --version, median of 10"),
+    ("startup", "companion --help, median of 10"),
+    ("startup", "companion fly to its first HEARTBEAT, median of 10"),
 )
 
 

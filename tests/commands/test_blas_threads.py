@@ -17,9 +17,11 @@ import json, os, sys
 from companion.cli import BLAS_THREAD_VARIABLES, main
 assert "numpy" not in sys.modules
 try:
-    main(["plan", "--help"])          # builds the parser: every command module, numpy with them
+    main(["plan", "--help"])          # builds the parser: every command module, none loads numpy
 except SystemExit:
     pass
+assert "numpy" not in sys.modules
+main(["overlap", "--confidence", "0.9"])  # a command that runs imports numpy after the request
 print(json.dumps({"numpy_loaded": "numpy" in sys.modules, **{k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES}}))
 """
 

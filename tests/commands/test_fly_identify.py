@@ -40,24 +40,40 @@ def test_that_no_autopilot_is_one_line_after_the_bounded_wait(capsys, tmp_path, 
     assert code == 2 and "no autopilot HEARTBEAT" in err and err.count("\n") == 1
 
 
-@pytest.mark.realtime
-def test_that_the_identification_flight_against_the_px4_profile_identifies_its_two_part_response(capsys, tmp_path):
+def _fly_identify(capsys, tmp_path, vehicle: str, *extra: str):
+    """``fly --identify --arm --takeoff-alt 5`` against mavsim on the ground with ``vehicle``'s
+    personality, in real time over loopback; the exit code, stdout and the identification."""
     api = free_udp_port()
-    sim = Simulator(scenario_from_dict({"vehicle": {"start_ned_m": [0.0, 0.0, 0.0]}, "sim": {"vehicle": "px4"}}),
-                    seed=3, links=("api",))
+    sim = Simulator(scenario_from_dict({"vehicle": {"start_ned_m": [0.0, 0.0, 0.0]}, "sim": {"vehicle": vehicle}}),
+                    seed=3, links=("api",), **({"personality": vehicle} if vehicle != "px4" else {}))
     server = UdpServer(sim, [LinkAddress("api", 0, api)], speed=1.0)
     thread = threading.Thread(target=server.run, args=(200.0,), daemon=True)
     thread.start()
     tlog = tmp_path / "steps.tlog"
     try:
-        code, out, _ = _run(capsys, ["fly", "--identify", "--connect", f"udpin:127.0.0.1:{api}", "--arm",
+        code, out, _ = _run(capsys, ["fly", "--identify", *extra, "--connect", f"udpin:127.0.0.1:{api}", "--arm",
                                      "--takeoff-alt", "5", "--tlog", str(tlog)])
     finally:
         server.stop()
         thread.join(timeout=5)
         server.close()
+    return code, out, (identify(load_response_log(tlog)) if code == 0 else None)
+
+
+@pytest.mark.realtime
+def test_that_the_identification_flight_against_the_px4_profile_identifies_its_two_part_response(capsys, tmp_path):
+    code, out, result = _fly_identify(capsys, tmp_path, "px4")
     assert code == 0 and "final mode AUTO.LOITER" in out
-    result = identify(load_response_log(tlog))
     lag, model = result.figures["lag 0.3 s"], result.figures["model"]
     assert lag["one_step_rms_horizontal"] > 3 * model["one_step_rms_horizontal"]
     assert 1.0 < result.horizontal.p_gain_per_s < 2.5 and result.horizontal.i_gain_per_s2 > 0.1
+
+
+@pytest.mark.realtime
+def test_that_the_identification_flight_engages_mavsims_ardupilot_in_guided_and_identifies_it(capsys, tmp_path):
+    """ArduPilot's engagement before the steps: streams requested, the EKF's readiness waited for (5 s on
+    the ground), GUIDED before arming, the takeoff's param7 above home; steps in GUIDED, LOITER after."""
+    code, out, result = _fly_identify(capsys, tmp_path, "ardupilot", "--autopilot", "ardupilot")
+    assert code == 0 and "final mode LOITER" in out
+    lag, model = result.figures["lag 0.3 s"], result.figures["model"]
+    assert lag["one_step_rms_all"] > 2 * model["one_step_rms_all"]

@@ -18,8 +18,8 @@ def test_that_each_plan_starts_the_recent_arrival_delay_after_its_request_from_w
     service = HeldPlanner(Planner(scenario.planner))
     companion = Companion(scenario, planning=service)
     judged = []                      # the positions the goal is judged on
-    at_goal = companion.builder.at_goal
-    companion.builder.at_goal = lambda position: judged.append(np.array(position)) or at_goal(position)
+    reached = companion.builder.goal.reached
+    companion.builder.goal.reached = lambda position: judged.append(np.array(position)) or reached(position)
     t, jobs = 0.0, []
     while len(jobs) < 6 and t < 20.0:
         _feed(companion, t)
@@ -48,8 +48,8 @@ def test_that_each_plan_starts_the_recent_arrival_delay_after_its_request_from_w
 def test_that_the_lead_is_capped_a_setpoint_short_of_the_replan_period():
     scenario = load_scenario(SCENARIO)
     companion = Companion(scenario, planning=HeldPlanner(Planner(scenario.planner)))
-    companion._arrival_delays.extend([0.05, 2.0])
-    cap = min(scenario.loop.plan_lead_max_s, scenario.planner.replan_period_s - 1.0 / scenario.loop.setpoint_rate_hz)
+    companion.cycle._arrival_delays.extend([0.05, 2.0])
+    cap = min(scenario.companion.plan_lead_max_s, scenario.planner.replan_period_s - 1.0 / scenario.companion.setpoint_rate_hz)
     assert companion.plan_lead_s() == cap > 0.0
 
 

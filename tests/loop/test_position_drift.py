@@ -59,7 +59,7 @@ def test_that_the_window_is_checked_by_name():
     scenario = load_scenario(SCENARIO)
     for bad in (-1.0, 11.0, float("nan")):
         with pytest.raises(ConfigError, match="drift_window_s"):
-            dataclasses.replace(scenario.loop, drift_window_s=bad)
+            dataclasses.replace(scenario.companion, drift_window_s=bad)
 
 
 def test_that_a_stale_estimate_brakes_without_the_drift():

@@ -26,7 +26,7 @@ import json
 import pytest
 
 from companion.cli import main
-from companion.commands.demo import resolve_scenario
+from companion.commands._argtypes import scenario_file
 from companion.loop.config import load_scenario
 from tests.support.flight_summary import record_flight
 
@@ -61,7 +61,7 @@ def test_that_the_stream_holds_20_hz_and_the_flight_is_safe_with_200_extra_obsta
     # what the estimate may be off by: the corridor's plans crawl into the goal (the paper's
     # terminal-only cost), and five runs came to 0.253-0.297 m of a 0.3 m tolerance in truth;
     # one run in sixteen stayed outside in truth while its estimate was inside (by how much was not kept).
-    tolerance = load_scenario(resolve_scenario(scene)).mission.goal_tolerance_m
+    tolerance = load_scenario(scenario_file(scene)).mission.goal_tolerance_m
     assert summary["goal_reached_companion_t_s"] is not None and summary["collided"] is False, (
         summary.get("min_true_clearance_m"), events)
     assert summary["min_true_goal_distance_m"] <= tolerance + GOAL_ESTIMATE_ALLOWANCE_M, summary["min_true_goal_distance_m"]

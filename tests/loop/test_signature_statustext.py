@@ -2,8 +2,9 @@
 
 The link counts them; the stream hands the count to the companion before every tick, which
 says so in a STATUSTEXT at most every 5 s. Over loopback UDP with a signed link, a stranger's
-unsigned packets must be counted, announced and rate limited; a replay reads the count back
-from the announcement.
+unsigned packets must be counted, announced and rate limited. The count goes into the tlog as
+a mark (tests/realtime/test_tlog_plan_marks.py); a replay of a log from before that mark reads it
+back from the announcement.
 """
 
 from __future__ import annotations
@@ -12,9 +13,10 @@ import socket
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.loop.app import SIGNATURE_TEXT, Companion
+from companion.loop.app import Companion
+from companion.loop.supervisor import SIGNATURE_TEXT
 from companion.loop.config import load_scenario
-from companion.loop.realtime import run_realtime
+from companion.realtime.stream import run_realtime
 from companion.mavlink.link import open_link
 from companion.offline.replay_stand_ins import signatures_rejected
 from tests.support.ports import free_udp_port
@@ -42,7 +44,7 @@ def test_that_a_signed_link_counts_and_announces_unsigned_packets_over_udp():
     stranger = mavlink2.MAVLink(None, 42, 1)  # unsigned
     ticks = [0]
 
-    def stop(_c) -> bool:  # a stranger's unsigned HEARTBEAT before each of the first 30 ticks
+    def stop(_c, _t) -> bool:  # a stranger's unsigned HEARTBEAT before each of the first 30 ticks
         ticks[0] += 1
         if ticks[0] <= 30:
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:

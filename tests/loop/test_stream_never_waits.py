@@ -15,7 +15,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.loop.app import Companion
 from companion.loop.config import load_scenario
-from companion.loop.realtime import PlanWorker, run_realtime
+from companion.realtime.stream import PlanWorker, run_realtime
 from companion.mavlink.link import Received
 from tests.support.blocking_planner import FirstThenBlock
 from tests.support.inbound import px4_offboard_heartbeat
@@ -85,7 +85,7 @@ def test_that_a_stuck_planner_neither_delays_a_setpoint_nor_keeps_an_old_plan_fl
     assert record.t_link_s == 0.0 and record.t_applied_s == 0.05
     plan = companion.executor.plan
     cmds = np.array([[m.vx, m.vy, m.vz] for _, m in setpoints])
-    max_age = scenario.loop.max_plan_age_s
+    max_age = scenario.companion.max_plan_age_s
     flown = (times >= 0.05) & (times <= max_age + 1e-9)
     steps = np.floor(times[flown] / scenario.planner.step_s + 1e-9).astype(int)
     # the plan's commands as the wire carries them (float32; a tiny value such as 3e-46 m/s is 0 there)
@@ -93,7 +93,7 @@ def test_that_a_stuck_planner_neither_delays_a_setpoint_nor_keeps_an_old_plan_fl
     assert np.max(np.abs(cmds[flown])) > 0.1
     # ... then the stream brakes within the acceleration bound, to a stop.
     braking = cmds[times > max_age + 1e-9]
-    step = np.asarray(scenario.planner.accel_max) / scenario.loop.setpoint_rate_hz
+    step = np.asarray(scenario.planner.accel_max) / scenario.companion.setpoint_rate_hz
     previous = np.vstack([cmds[flown][-1:], braking[:-1]])
     assert np.all(np.abs(braking - previous) <= step + 1e-6)
     assert np.all(np.abs(braking) <= np.abs(previous) + 1e-7)

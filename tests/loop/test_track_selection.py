@@ -59,7 +59,7 @@ def test_that_two_hundred_tracks_are_cut_to_the_limit_with_the_close_one_kept_an
         texts += [m.text for m in out if m.get_type() == "STATUSTEXT"]
         sent_setpoints += sum(m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" for m in out)
     assert len(companion.tracker) == 201
-    limit = scenario.loop.max_constrained_tracks
+    limit = scenario.companion.max_constrained_tracks
     assert companion.records, "no replan ran"
     rec = companion.records[-1]
     assert rec.tracks_unconstrained == 201 - limit
@@ -84,14 +84,14 @@ def test_that_the_request_builder_takes_each_tracks_radius_from_its_lookup():
     for key, pos in ((big, [6.0, 0.0, -5.0]), (default, [0.0, 6.0, -5.0])):
         perception.tracker.update(key, 0.0, np.array(pos), np.zeros(3), 0.01 * np.eye(3), 0.01 * np.eye(3))
     radii = {big: 10.0}
-    lookup = lambda key: radii.get(key, scenario.loop.obstacle_radius_m)  # noqa: E731
+    lookup = lambda key: radii.get(key, scenario.companion.obstacle_radius_m)  # noqa: E731
     plain = RequestBuilder(scenario).build(seq=0, t_s=0.0, t_v=0.0, perception=perception,
                                            initial_velocity=np.zeros(3), warm_start=None)
     sized = RequestBuilder(scenario, obstacle_radius=lookup).build(seq=0, t_s=0.0, t_v=0.0, perception=perception,
                                                                    initial_velocity=np.zeros(3), warm_start=None)
     n_tracks = 2
-    assert plain.request.obstacle_radii[:n_tracks].tolist() == [scenario.loop.obstacle_radius_m] * 2
-    assert sized.request.obstacle_radii[:n_tracks].tolist() == [10.0, scenario.loop.obstacle_radius_m]
+    assert plain.request.obstacle_radii[:n_tracks].tolist() == [scenario.companion.obstacle_radius_m] * 2
+    assert sized.request.obstacle_radii[:n_tracks].tolist() == [10.0, scenario.companion.obstacle_radius_m]
     # the bigger body reaches the drone's contour sooner: a smaller realised contour of touch
     assert sized.realised_contour[big] < plain.realised_contour[big]
     assert sized.realised_contour[default] == plain.realised_contour[default]

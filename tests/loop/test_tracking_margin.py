@@ -55,7 +55,7 @@ def test_that_a_bad_margin_is_refused_by_name(margin, word):
 def _companion(planner: dict | None = None, **loop) -> tuple[Companion, HeldPlanner]:
     """The short hop's companion with ``[companion]`` settings ``loop`` (and ``[planner]`` ones ``planner``)."""
     scenario = load_scenario(SCENARIO)
-    scenario = dataclasses.replace(scenario, loop=dataclasses.replace(scenario.loop, **loop),
+    scenario = dataclasses.replace(scenario, companion=dataclasses.replace(scenario.companion, **loop),
                                    planner=dataclasses.replace(scenario.planner, **(planner or {})))
     service = HeldPlanner(Planner(scenario.planner))
     return Companion(scenario, planning=service), service
@@ -121,9 +121,9 @@ def test_that_the_initial_velocity_follows_the_plan_chain_or_the_estimate_as_con
 def test_that_the_loop_settings_are_checked_by_name():
     scenario = load_scenario(SCENARIO)
     with pytest.raises(ConfigError, match="initial_velocity"):
-        dataclasses.replace(scenario.loop, initial_velocity="measured")
+        dataclasses.replace(scenario.companion, initial_velocity="measured")
     with pytest.raises(ConfigError, match="tracking_margin_m2"):
-        dataclasses.replace(scenario.loop, tracking_margin_m2=-0.1)
+        dataclasses.replace(scenario.companion, tracking_margin_m2=-0.1)
 
 
 def test_that_the_tracking_error_sums_residuals_in_fixed_memory():

@@ -55,7 +55,7 @@ def test_that_odometry_on_an_obstacle_link_from_offset_drifting_clocks_is_flown_
     summary = _realtime_demo(scenario, capsys, out=tmp_path / "out")
     record_flight(record_property, summary, kept_at=tmp_path / "out")
     _check_flight(summary, 3)
-    # The tlog marks each tick and the link of each obstacle message (companion.loop.tlog_marks):
+    # The tlog marks each tick and the link of each obstacle message (companion.realtime.tlog_marks):
     # the replay feeds every message on its own link at its own tick and reproduces every command.
     offboard = dataclasses.replace(load_scenario(scenario).offboard, hold_after_goal_s=1.0)  # demo --realtime: fly --exit-after-goal 1
     res = replay(tmp_path / "out" / "companion.tlog", scenario, offboard=offboard)

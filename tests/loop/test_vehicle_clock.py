@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.loop.app import CLOCK_DISAGREES_TEXT, Companion
+from companion.loop.app import Companion
+from companion.loop.supervisor import CLOCK_DISAGREES_TEXT
 from companion.loop.config import load_scenario
 from companion.loop.vehicle_clock import VehicleClock, link_ns
 from tests.support.inbound import px4_heartbeat, received

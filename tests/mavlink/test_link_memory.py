@@ -128,3 +128,11 @@ def test_that_signed_links_talk_to_each_other_and_drop_unsigned_traffic():
     assert b.poll() == []
     with pytest.raises(LinkError, match="32 bytes"):
         MemoryLink(clock=clock, signing_key=b"short")
+
+
+def test_that_a_signed_link_told_to_accept_unsigned_traffic_takes_it():
+    """``accept_unsigned`` once raised NameError (an undefined ``signing``) instead of taking it."""
+    clock = SimClock()
+    b = MemoryLink(clock=clock, source_system=1, source_component=1, signing_key=bytes(range(32)), accept_unsigned=True)
+    b.deliver(0.0, vehicle_packet(HB, sysid=9))
+    assert [r.msg.get_type() for r in b.poll()] == ["HEARTBEAT"]

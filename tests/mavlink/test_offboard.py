@@ -187,7 +187,7 @@ def test_that_without_arm_the_sequencer_waits_for_the_pilot_to_arm():
 def test_that_arming_is_retried_while_denied_after_boot_then_confirmed_from_heartbeat():
     def vehicle(s, msg):
         if msg.command == 400:
-            if s.t < 2.5:  # "Arming denied: Resolve system health failures first"
+            if s.t < 4.0:  # "Arming denied: Resolve system health failures first"
                 s.seq.on_ack(s.t, ack(400, 1))
                 s.seq.on_statustext(s.t, "Arming denied: Resolve system health failures first")
             else:
@@ -208,6 +208,47 @@ def test_that_arming_gives_up_after_max_retries():
     s = Script(OffboardConfig(arm=True, max_retries=2), armed=False)
     state = s.run(6.0, lambda s, m: s.seq.on_ack(s.t, ack(400, 1)))
     assert state.phase is Phase.GAVE_UP and len(s.sent) == 3
+
+
+def test_that_arming_waits_to_hear_whether_another_autopilot_is_on_the_link():
+    s = Script(OffboardConfig(arm=True), armed=False)
+    s.run(1.4)
+    assert s.seq.phase is Phase.WAIT_AUTOPILOT and s.sent == []  # listening (autopilot_listen_s 1.5)
+    s.run(0.2)
+    assert s.seq.phase is Phase.ARMING and [m.command for _, m in s.sent] == [400]
+
+
+def test_that_arm_is_refused_when_several_autopilots_are_heard_and_none_is_named():
+    s = Script(OffboardConfig(arm=True), armed=False)
+    s.run(0.5)
+    s.seq.on_heartbeat(s.t, hb(px4.POSCTL, armed=False, key=(2, 1)))
+    state = s.run(2.0)
+    assert state.phase is Phase.GAVE_UP and s.sent == []
+    assert "systems 1, 2" in state.reason and "--target-system" in state.reason
+
+
+def test_that_a_named_target_system_is_the_only_one_followed_and_commanded():
+    s = Script(OffboardConfig(arm=True, target_system=2), armed=False)
+    s.run(3.0)  # system 1's heartbeats only: ignored
+    assert s.seq.phase is Phase.WAIT_AUTOPILOT and s.seq.target is None and s.sent == []
+    s.seq.on_heartbeat(s.t, hb(px4.POSCTL, armed=False, key=(2, 1)))
+    s.run(0.1)
+    assert s.seq.target == (2, 1) and s.seq.phase is Phase.ARMING  # named: no listening
+    assert [(m.command, m.target_system) for _, m in s.sent] == [(400, 2)]
+
+
+def test_that_without_arm_the_first_autopilot_is_followed_as_before():
+    s = Script(OffboardConfig(), mode=px4.OFFBOARD)
+    s.run(0.1)
+    s.seq.on_heartbeat(s.t, hb(px4.POSCTL, key=(2, 1)))
+    assert s.run(0.5).phase is Phase.ENGAGED and s.seq.target == (1, 1)
+
+
+def test_that_a_vehicle_found_armed_and_holding_is_not_asked_to_take_off_again():
+    s = Script(OffboardConfig(arm=True, takeoff_alt_m=5.0), mode=px4.AUTO_LOITER, armed=True)
+    state = s.run(0.5)
+    assert state.phase is Phase.PRESTREAM and "already flying, no takeoff" in state.reason
+    assert [m.command for _, m in s.sent] == []          # no arm, no takeoff, no HOME_POSITION request
 
 
 def test_that_takeoff_waits_for_auto_loiter_before_prestreaming():
@@ -288,6 +329,20 @@ def test_that_handing_back_streams_until_the_heartbeat_shows_hold():
     assert state.phase is Phase.HELD and not state.streaming
     holds = [m for _, m in s.sent if m.command == 176]
     assert len(holds) == 2 and (holds[0].param1, holds[0].param2, holds[0].param3) == (129.0, 4.0, 3.0)
+
+
+def test_that_a_link_lost_while_handing_back_ends_held_when_the_vehicle_is_back_in_hold():
+    """Found over a 57600-baud line: the Hold request went out, then no HEARTBEAT for 3 s; the vehicle
+    came back in AUTO.LOITER, the mode asked for. That is the hand-back done, not PX4's failsafe."""
+    s = Script(OffboardConfig(), mode=px4.OFFBOARD)
+    assert s.run(0.5).phase is Phase.ENGAGED
+    s.seq.hand_back(s.t)
+    s.heartbeats = False
+    assert s.run(3.5).phase is Phase.LINK_LOST
+    s.heartbeats, s.mode = True, px4.AUTO_LOITER
+    state = s.run(1.5)
+    assert state.phase is Phase.HELD and not state.streaming
+    assert "after the hand-back" in state.reason
 
 
 def test_that_hand_back_does_nothing_before_streaming():

@@ -95,7 +95,7 @@ def test_that_set_mode_params_send_main_mode_unpacked_and_armed_bit_when_armed()
 
 def test_that_the_registry_knows_px4_by_its_heartbeat_and_nothing_else():
     assert autopilots.of_heartbeat(1, 1, 12, 2) is px4.PX4
-    assert autopilots.of_heartbeat(1, 1, 3, 2) is None      # ArduPilot is not registered (yet)
+    assert autopilots.of_heartbeat(1, 1, 3, 2) is not px4.PX4   # ArduPilot: its own module
     assert autopilots.of_heartbeat(101, 0, 8, 2) is None    # a mavsim obstacle system
     assert autopilots.of_heartbeat(1, 191, 12, 18) is None  # a companion that says PX4
 

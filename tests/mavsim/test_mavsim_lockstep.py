@@ -198,7 +198,7 @@ def test_that_a_stream_switched_back_on_restarts_at_once_even_after_all_were_off
 
 
 def test_that_the_velocity_only_setpoint_shortcut_flies_as_the_general_path(monkeypatch):
-    from mavsim.px4 import Commander
+    from mavsim.personalities.px4 import Commander
 
     def fly() -> tuple[bytes, bytes]:
         c = Client(AIRBORNE)
@@ -419,12 +419,17 @@ def test_that_an_obstacle_position_is_the_first_part_of_its_state(motion):
         assert track.position(t_s).tobytes() == track.state(t_s)[0].tobytes(), t_s
 
 
-def test_that_the_lag_profile_carries_one_read_only_zero_controller_state():
-    from mavsim.px4_response import ControllerState
+def test_that_the_lag_profile_carries_no_controller_state():
     from mavsim.vehicle import VehicleCommand, VehicleParams, initial_state, step
 
     state = step(initial_state(np.array([0.0, 0.0, -5.0])), VehicleCommand(np.array([1.0, 0.0, 0.0])), 0.01,
                  VehicleParams())
-    assert state.controller is ControllerState.zero()
+    assert state.controller is None
+
+
+def test_that_the_px4_zero_controller_state_is_one_read_only_instance():
+    from mavsim.personalities.px4_response import ControllerState
+
+    assert ControllerState.zero() is ControllerState.zero()
     with pytest.raises(ValueError):
-        state.controller.integral_mps2[0] = 1.0
+        ControllerState.zero().integral_mps2[0] = 1.0

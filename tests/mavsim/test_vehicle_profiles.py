@@ -8,7 +8,7 @@ import pytest
 from companion.errors import ConfigError
 from companion.loop.config import load_scenario as companion_load
 from mavsim.errors import ScenarioError
-from mavsim.px4_response import ControllerState, Px4Response, controller_step
+from mavsim.personalities.px4_response import ControllerState, Px4Response, controller_step
 from mavsim.scenario import load_scenario as mavsim_load
 from tests.benchmarks.step_response import MEASURED_PX4_SITL, fraction_differences, step_table
 

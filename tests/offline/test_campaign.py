@@ -113,6 +113,8 @@ def test_that_correlated_drone_and_obstacle_errors_are_opt_in_and_leave_the_rest
     wandering = generate_scenario("crossing", 5, 3, noise_correlation_s=2.0)
     assert wandering["sim"].pop("position_noise_correlation_s") == 2.0
     assert [ob.pop("measurement_correlation_s") for ob in wandering["world"]["obstacles"]] == [2.0] * len(white["world"]["obstacles"])
+    # and the companion's tracker is told, as an operator configures a GNSS-positioned source
+    assert wandering["estimator"]["tracker"].pop("report_correlation_s") == 2.0
     assert wandering == white
     honest = mavsim_load_dict(generate_scenario("crossing", 5, 3, noise_correlation_s=2.0))
     assert honest.sim.position_noise_correlation_s == 2.0
@@ -301,6 +303,31 @@ def test_that_a_tiny_campaign_runs_and_reports_every_method(tiny_campaign, tmp_p
     assert all(p.stat().st_size > 1000 for p in written)
 
 
+def test_that_every_campaign_figure_title_fits_inside_its_figure(tiny_campaign, tmp_path, monkeypatch):
+    """The titles were cut at both edges: each title's text lies inside the saved figure, whole."""
+    from matplotlib.figure import Figure
+
+    seen = []
+    save = Figure.savefig
+
+    def checked(fig, path, *args, **kwargs):
+        fig.canvas.draw()
+        box = fig.bbox
+        for ax in fig.axes:
+            title = ax.title
+            if title.get_text():
+                extent = title.get_window_extent()
+                seen.append((Path(path).name, title.get_text().splitlines()[0]))
+                assert box.x0 - 0.5 <= extent.x0 and extent.x1 <= box.x1 + 0.5, (path, title.get_text())
+                assert extent.y1 <= box.y1 + 0.5, (path, title.get_text())
+        return save(fig, path, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", checked)
+    written = tiny_campaign.plot(tmp_path / "fig")
+    assert {name for name, _ in seen} == {p.name for p in written}
+    assert all(first.startswith("antipodal campaign, seed 4, 2 episodes, c_min = 0.90") for _, first in seen)
+
+
 def test_that_the_reliability_command_reads_results_files_and_draws_one_diagram_per_method(tiny_campaign, tmp_path, capsys):
     from companion.offline.campaign.store import campaign_header
 
@@ -406,4 +433,33 @@ def test_that_a_px4_results_file_from_before_the_observed_state_refuses_to_resum
     ResultsFile(path, campaign_header("antipodal", 1, 0.9, 40.0, vehicle="px4")).close()
     now = campaign_header("antipodal", 1, 0.9, 40.0, vehicle="px4", response_state="observed")
     with pytest.raises(ConfigError, match=r"was written for response_state = None, this campaign has 'observed'"):
+        ResultsFile(path, now, resume=True)
+
+
+def test_that_the_ardupilot_profile_flies_mavsims_ardupilot_personality_in_guided():
+    """``--vehicle ardupilot`` is ArduCopter end to end: mavsim's ArduPilot personality (HEARTBEAT
+    autopilot 3, streams only on request) engaged by the companion in GUIDED, not PX4's OFFBOARD with
+    ArduCopter's response underneath (as campaigns before commit 019583c flew)."""
+    from companion.offline.campaign import profile_autopilot
+
+    assert profile_autopilot("ardupilot") == "ardupilot" and profile_autopilot("px4") is None
+    assert profile_autopilot("lag") is None
+    result = run_episode(EpisodeTask("antipodal", 1, 0, "hyperplane", duration_s=SHORT_S, vehicle="ardupilot"),
+                         keep_records=True)
+    assert result.error is None, result.error
+    summary = result.run.summary()
+    assert summary["engaged"] and summary["vehicle_mode"] == "GUIDED" and summary["final_mode"] == "GUIDED"
+    assert result.run.companion.sequencer.kind.name == "ArduPilot"
+    header = campaign_header("antipodal", 1, 0.9, 40.0, vehicle="ardupilot", response_state="observed",
+                             autopilot="ardupilot")
+    assert header["autopilot"] == "ardupilot" and "autopilot" not in campaign_header("antipodal", 1, 0.9, 40.0, vehicle="px4")
+
+
+def test_that_an_ardupilot_results_file_flown_against_px4s_personality_refuses_to_resume(tmp_path):
+    from companion.offline.campaign.store import ResultsFile
+
+    path = tmp_path / "ardupilot.jsonl"
+    ResultsFile(path, campaign_header("antipodal", 1, 0.9, 40.0, vehicle="ardupilot", response_state="observed")).close()
+    now = campaign_header("antipodal", 1, 0.9, 40.0, vehicle="ardupilot", response_state="observed", autopilot="ardupilot")
+    with pytest.raises(ConfigError, match="autopilot"):
         ResultsFile(path, now, resume=True)

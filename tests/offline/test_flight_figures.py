@@ -101,3 +101,36 @@ def test_that_the_shadow_ellipse_is_the_projection_of_the_correlated_ellipsoid()
     assert ws * hs < w * h  # the slice lies inside the shadow
     with pytest.raises(ValueError, match="view must be one of"):
         top_view_ellipse(cov, 0.9, view="side")
+
+
+def test_that_legends_name_tracks_as_people_say_them():
+    from companion.plots.flight_figures import _track_label
+
+    assert _track_label((101, 197, "obstacles1")) == "system 101 on obstacles1"
+    assert _track_label(("icao", 0x4CA2B1)) == "ICAO 4CA2B1"
+    assert _track_label((42, 1)) == "system 42"
+    assert _track_label(("uas", b"AB\x00", "obstacles2")) == "Remote ID 4142 on obstacles2"
+
+
+def test_that_the_contour_figure_draws_each_track_apart_with_its_name_against_run_time(run):
+    """The contour plot stacked every obstacle at 1.00, legends were Python tuples and the axes
+    Unix epoch seconds: now one clearance line per track, named, over seconds since the start."""
+    import matplotlib.pyplot as plt
+
+    from companion.plots.flight_figures import _contour
+
+    fig = _contour(run.companion, list(run.companion.records), run.truth)
+    try:
+        ax_clearance, ax_contour = fig.axes[:2]
+        lines = [line for line in ax_clearance.get_lines() if not line.get_label().startswith("_")]
+        labels = [line.get_label() for line in lines]
+        assert len(labels) == len(set(labels)) >= 2, labels               # one line per track
+        assert all(label.startswith("system ") and "(" not in label for label in labels), labels
+        finals = [float(line.get_ydata()[-1]) for line in lines]
+        assert len({round(v, 2) for v in finals}) == len(finals), finals   # not stacked on one value
+        t_end = max(float(np.max(line.get_xdata())) for line in lines)
+        assert 0.0 <= min(float(np.min(line.get_xdata())) for line in lines) and t_end < 60.0  # not epoch seconds
+        assert ax_contour.get_xlabel() == "time since the run's start [s]"
+        assert [t.get_text() for t in ax_clearance.get_legend().get_texts()] == labels
+    finally:
+        plt.close(fig)

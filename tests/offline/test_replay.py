@@ -151,12 +151,12 @@ def test_that_a_pymavlink_written_plain_flight_with_signing_and_a_cut_tail_repla
     assert len(res.companion.tracker) == 1  # the signed obstacle was tracked
     assert res.replans >= 15  # ~6 s of engaged ticks, a replan every 0.3 s
     assert res.command_times_s.size > 100
-    vmax = res.companion.cfg.velocity_max
+    vmax = res.companion.planner_config.velocity_max
     assert np.all(np.isfinite(res.commands_mps)) and np.all(np.abs(res.commands_mps) <= vmax + 1e-6)
     # It would fly toward the goal (north), keeping the obstacle's contour of touch above c_min.
     assert res.commands_mps[-1, 0] > 0.1
     planned = [r.planned_min_contour for r in res.companion.records if np.isfinite(r.planned_min_contour)]
-    assert planned and min(planned) >= res.companion.cfg.c_min - 0.05
+    assert planned and min(planned) >= res.companion.planner_config.c_min - 0.05
 
 
 def test_that_the_cli_replays_a_log_as_json(mavproxy_log, capsys):
@@ -212,8 +212,10 @@ def test_that_bad_logs_exit_2_with_a_clear_message(tmp_path, capsys, name, make,
 
 
 def test_that_a_bad_scenario_exits_2(antipodal, capsys):
-    assert main(["replay", str(antipodal[1]), "--scenario", "configs/nope.toml"]) == 2
-    assert "scenario file not found" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["replay", str(antipodal[1]), "--scenario", "configs/nope.toml"])
+    assert exc.value.code == 2
+    assert "configs/nope.toml: no such scenario file" in capsys.readouterr().err
 
 
 def test_that_the_scenario_is_required(antipodal):

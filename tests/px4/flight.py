@@ -4,8 +4,9 @@ Usage (one run, or five for the note)::
 
     python -m tests.px4.flight [--scenario configs/antipodal_px4.toml] [--runs 5] [--work /tmp/px4-flight]
 
-Each run starts PX4 SIH in a fresh directory, runs :class:`tests.px4.world.World`
-(obstacles to the companion, ground truth), runs ``companion fly --arm --takeoff-alt 5
+Each run starts PX4 SIH in a fresh directory, runs mavsim's traffic player
+(:class:`mavsim.traffic.TrafficPlayer`: obstacles to the companion from OFFBOARD, ground
+truth), runs ``companion fly --arm --takeoff-alt 5
 --exit-after-goal 1 --tlog`` as a subprocess, watches PX4 for 4 s after the companion
 exits (it must hold, without "Failsafe" from 3 s before the companion stopped on; "Failsafe"
 texts earlier in the flight are reported with the largest gap of the setpoint stream, which
@@ -20,6 +21,7 @@ import json
 import logging
 import subprocess
 import sys
+import threading
 import time
 import tomllib
 from pathlib import Path
@@ -28,39 +30,43 @@ import numpy as np
 
 import os
 
-from tests.px4.sitl import REPO, REALTIME_NICE, Sitl, raise_priority
-from tests.px4.world import World, paths_from_scenario
+from mavsim.scenario import load_scenario
+from mavsim.traffic import PlayerLinks, TrafficPlayer
+from tests.px4.sitl import REPO, Sitl, raise_priority
 
 logger = logging.getLogger(__name__)
 
 TAKEOFF_ALT_M = 5.0
 COMPANION_TIMEOUT_S = 150.0
 HOLD_WATCH_S = 4.0
+HEARTBEAT_LAG_S = 1.2   # how much later the ground link's HEARTBEAT may show a mode than the companion's
 TAKEOFF_WINDOW_S = 0.5   # the takeoff height is the mean true height over this long before OFFBOARD
 OBSTACLE_PORT = 14601  # the companion's receive-only obstacle link (`fly --obstacles`)
-AUTO, LOITER = 4, 3
+HOLD = "AUTO.LOITER"   # armed (the player marks a disarmed mode " disarmed")
 
 
 def _companion(*args: str) -> list[str]:
     return [sys.executable, "-m", "companion.cli", *args]
 
 
-def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] = ()) -> dict:
-    """One flight; returns the figures (see the module docstring)."""
+def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] = (),
+             signal_after_offboard: tuple[int, float] | None = None) -> dict:
+    """One flight; returns the figures (see the module docstring).
+
+    ``signal_after_offboard = (signum, s)`` sends the companion that signal ``s`` seconds after
+    PX4 entered OFFBOARD (an operator's Ctrl-C or systemd's SIGTERM mid-encounter).
+    """
     work.mkdir(parents=True, exist_ok=True)
     tlog = work / "flight.tlog"
     with open(scenario, "rb") as f:
         scen = tomllib.load(f)
-    goal = np.asarray(scen["mission"]["goal_ned_m"], float)
-    radius = float(scen["vehicle"]["radius_m"])
     result_c_min = float(scen["planner"]["c_min"])
-    paths = paths_from_scenario(str(scenario))
     result: dict = {"work": str(work), "c_min": result_c_min}
     nice_before = os.getpriority(os.PRIO_PROCESS, 0)
-    raise_priority()   # the world thread too: its truth and obstacle stamps are wall-clock
+    raise_priority()   # the player's thread too: its truth and obstacle stamps are wall-clock
     result["nice"] = os.getpriority(os.PRIO_PROCESS, 0)
     try:
-        _fly(work, scenario, seed, extra, tlog, goal, radius, paths, result)
+        _fly(work, scenario, seed, extra, tlog, result, signal_after_offboard)
     finally:
         try:
             os.setpriority(os.PRIO_PROCESS, 0, nice_before)
@@ -69,46 +75,89 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
     return result
 
 
-def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Path, goal: np.ndarray, radius: float,
-         paths: list, result: dict) -> None:
-    """The flight, its checks and the replay of :func:`fly_once`, filling ``result``."""
-    with Sitl(work / "sih") as sitl:
-        world = World(paths, seed=seed, companion_port=OBSTACLE_PORT)
-        world.start()
+def _run_companion(cmd: list[str], player: TrafficPlayer,
+                   signal_after_offboard: tuple[int, float] | None) -> subprocess.CompletedProcess:
+    """Run ``companion fly`` (killed after COMPANION_TIMEOUT_S), signalled after OFFBOARD if asked."""
+    fly = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
+                           preexec_fn=raise_priority)
+    deadline = time.monotonic() + COMPANION_TIMEOUT_S
+    try:
+        if signal_after_offboard is not None:
+            signum, after_s = signal_after_offboard
+            while fly.poll() is None and time.monotonic() < deadline:
+                t_off = player.engaged_t_s
+                if t_off is not None and player.now_s() - t_off >= after_s:
+                    fly.send_signal(signum)
+                    break
+                time.sleep(0.05)
+        out, err = fly.communicate(timeout=max(1.0, deadline - time.monotonic()))
+        return subprocess.CompletedProcess(cmd, fly.returncode, out, err)
+    except subprocess.TimeoutExpired:
+        fly.kill()
+        _, err = fly.communicate()
+        return subprocess.CompletedProcess(cmd, -9, "", (err or "") + f"\ncompanion killed after {COMPANION_TIMEOUT_S} s")
+
+
+def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Path, result: dict,
+         signal_after_offboard: tuple[int, float] | None = None) -> None:
+    """The flight, its checks and the replay of :func:`fly_once`, filling ``result``. The
+    obstacles and the ground truth are mavsim's traffic player (``mavsim traffic``), run in a
+    thread of this process: it plays the scenario's obstacles on the companion's obstacle link
+    from PX4's first armed OFFBOARD and hears SIH's truth and PX4's GCS link."""
+    player = TrafficPlayer(load_scenario(scenario), PlayerLinks(obstacle_port=OBSTACLE_PORT), seed=seed,
+                           keep_samples=True)
+    stop = threading.Event()
+    errors: list[str] = []
+
+    def play() -> None:
         try:
-            try:   # subprocess.run kills the companion on the timeout
-                proc = subprocess.run(
-                    _companion("fly", "--connect", "udpin:127.0.0.1:14540", "--scenario", str(scenario), "--arm",
-                               "--obstacles", f"udpin:127.0.0.1:{OBSTACLE_PORT}",
-                               "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--tlog", str(tlog),
-                               "--duration", str(COMPANION_TIMEOUT_S - 20), "--json", *extra),
-                    capture_output=True, text=True, timeout=COMPANION_TIMEOUT_S, cwd=REPO, preexec_fn=raise_priority)
-            except subprocess.TimeoutExpired as exc:
-                proc = subprocess.CompletedProcess(exc.cmd, -9, exc.stdout or "", exc.stderr or "")
-                proc.stdout, proc.stderr = "", str(exc.stderr or "") + f"\ncompanion killed after {COMPANION_TIMEOUT_S} s"
-            t_exit = time.monotonic()
+            player.run(COMPANION_TIMEOUT_S + HOLD_WATCH_S + 120.0, stop.is_set)
+        except Exception as exc:  # reported by the test, never swallowed
+            logger.exception("traffic player failed")
+            errors.append(repr(exc))
+
+    with player, Sitl(work / "sih") as sitl:
+        thread = threading.Thread(target=play, daemon=True)
+        thread.start()
+        try:
+            proc = _run_companion(
+                _companion("fly", "--connect", "udpin:127.0.0.1:14540", "--scenario", str(scenario), "--arm",
+                           "--obstacles", f"udpin:127.0.0.1:{OBSTACLE_PORT}",
+                           "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--tlog", str(tlog),
+                           "--duration", str(COMPANION_TIMEOUT_S - 20), "--json", *extra),
+                player, signal_after_offboard)
+            t_exit = player.now_s()
             time.sleep(HOLD_WATCH_S)
             result["px4_alive"] = sitl.alive()
         finally:
-            world.stop()
+            stop.set()
+            thread.join(timeout=5.0)
     (work / "companion.stderr").write_text(proc.stderr)
     result["companion_rc"] = proc.returncode
-    report = json.loads(proc.stdout) if proc.returncode in (0, 1) and proc.stdout.strip() else {}
-    result["companion_report"] = {k: report.get(k) for k in ("phase", "goal_reached_companion_t_s", "replans",
+    report = json.loads(proc.stdout) if proc.stdout.strip().startswith("{") else {}
+    result["companion_traceback"] = "Traceback" in proc.stderr
+    result["companion_report"] = {k: report.get(k) for k in ("outcome", "exit_code", "stop_requested_by", "phase",
+                                                             "goal_reached_companion_t_s", "replans",
                                                              "min_realised_contour", "replans_with_slack",
-                                                             "failed_plans", "plan_status", "failsafe_events",
+                                                             "failed_plans", "plan_status", "alerts",
                                                              "planner_process", "inbound_superseded", "setpoint_gap_max_ms", "setpoint_gap_max_detail",
                                                              "setpoint_gap_max_at_s", "tick_max_ms", "stream_cpu_share", "stream_fifo_priority",
                                                              "vehicle_clock", "tracking_error", "drift_max_mps")}
-    obs = world.obs
-    result["world_errors"] = world.errors
-    truth_t = np.array([t for t, _ in obs.truth])
-    truth_p = np.array([p for _, p in obs.truth])
-    np.savez(work / "traces.npz", truth_t=truth_t, truth_p=truth_p.reshape(-1, 3),
-             est_t=np.array([t for t, _ in obs.estimate]), est_p=np.array([p for _, p in obs.estimate]).reshape(-1, 3),
-             modes=np.array(obs.modes, float).reshape(-1, 4), offboard_t=np.nan if obs.offboard_t is None else obs.offboard_t,
-             exit_t=t_exit, est_stamp_s=np.array(obs.estimate_stamp_s))
-    if obs.offboard_t is None or truth_t.size == 0:
+    result["world_errors"] = errors
+    summary = player.summary()
+    result["traffic_player"] = {k: summary[k] for k in ("engaged_at_s", "origin", "judged_on", "min_distance_m",
+                                                        "min_clearance_m", "goal_reached", "sent")}
+    # the player's clock (s since it started) throughout
+    truth_t = np.array([t for t, _ in player.samples["truth"]])
+    truth_p = np.array([p for _, p in player.samples["truth"]]).reshape(-1, 3)
+    est_t = np.array([t for t, _, _ in player.samples["estimate"]])
+    est_p = np.array([p for _, p, _ in player.samples["estimate"]]).reshape(-1, 3)
+    offboard_t = player.engaged_t_s
+    np.savez(work / "traces.npz", truth_t=truth_t, truth_p=truth_p, est_t=est_t, est_p=est_p,
+             modes=np.array([t for t, _ in player.mode_changes], float),
+             offboard_t=np.nan if offboard_t is None else offboard_t, exit_t=t_exit,
+             est_stamp_s=np.array([stamp for _, _, stamp in player.samples["estimate"]]))
+    if offboard_t is None or truth_t.size == 0:
         result["ok"] = False
         result["why"] = "never in OFFBOARD" if truth_t.size else "no ground truth received"
         return
@@ -116,45 +165,54 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
     # true height over the last TAKEOFF_WINDOW_S before OFFBOARD (the companion leaves PX4 in
     # Hold for [offboard] takeoff_settle_s after AUTO.TAKEOFF ends), and PX4's own estimate then,
     # above what it read on the ground (PX4's local z is 0 at its EKF origin, not at the ground:
-    # it read -0.2 to +0.6 m on the ground in SIH)
-    window = (truth_t >= obs.offboard_t - TAKEOFF_WINDOW_S) & (truth_t <= obs.offboard_t)
-    result["takeoff_height_m"] = round(float(-truth_p[window, 2].mean()), 3) if window.any() else None
-    est_t = np.array([t for t, _ in obs.estimate])
-    est_p = np.array([p for _, p in obs.estimate]).reshape(-1, 3)
-    lifted = truth_t[-truth_p[:, 2] > 0.05]
+    # it read -0.2 to +0.6 m on the ground in SIH). The player's truth is about the same origin,
+    # so the true height is taken above the truth on the ground too.
+    window = (truth_t >= offboard_t - TAKEOFF_WINDOW_S) & (truth_t <= offboard_t)
+    lifted_mask = -(truth_p[:, 2] - truth_p[0, 2]) > 0.05
+    ground_z = truth_p[0, 2]
+    result["takeoff_height_m"] = round(float(-(truth_p[window, 2].mean() - ground_z)), 3) if window.any() else None
+    lifted = truth_t[lifted_mask]
     ground = est_t < (lifted[0] - 0.5 if lifted.size else -np.inf)
-    est_window = (est_t >= obs.offboard_t - TAKEOFF_WINDOW_S) & (est_t <= obs.offboard_t)
+    est_window = (est_t >= offboard_t - TAKEOFF_WINDOW_S) & (est_t <= offboard_t)
     result["takeoff_height_px4_estimate_m"] = round(float(-(est_p[est_window, 2].mean() - est_p[ground, 2].mean())), 3) \
         if est_window.any() and ground.any() else None
-    # collisions in truth: obstacles' true positions at the truth sample times
-    moving = truth_t - obs.offboard_t
-    clear = []
-    for path in paths:
-        pos = np.array([path.position(t) for t in moving])
-        clear.append(np.linalg.norm(truth_p - pos, axis=1) - radius - path.radius_m)
-    after = truth_t >= obs.offboard_t
-    clear = np.array(clear)[:, after] if paths else np.zeros((0, 0))
-    result["min_true_clearance_m"] = float(clear.min()) if clear.size else None
+    # collisions in truth: the player's referee, every truth sample after OFFBOARD
+    result["min_true_clearance_m"] = summary["referee"]["truth"]["min_clearance_m"]
+    # the same split at the companion's exit: while it commanded, and after it handed back
+    # (a vehicle holding in the obstacles' path is then up to the traffic)
+    referee = player.referees["truth"]
+    radii = np.array(referee.radius_sum)
+    in_control, after = [], []
+    for t, p in zip(truth_t, truth_p):
+        if t < offboard_t:
+            continue
+        c = float(np.min(np.linalg.norm(referee.obstacle_positions(t - offboard_t) - p, axis=1) - radii))
+        (in_control if t <= t_exit else after).append(c)
+    result["min_true_clearance_in_control_m"] = round(min(in_control), 3) if in_control else None
+    result["min_true_clearance_after_exit_m"] = round(min(after), 3) if after else None
     # goal: the companion's time of arrival after engaging, and the true distance to the goal then
     t_goal = report.get("goal_reached_companion_t_s")
     engaged = [t for t, text in report.get("events", []) if str(text).startswith("ENGAGED")]
     result["time_to_goal_s"] = None if t_goal is None or not engaged else float(t_goal - engaged[0])
-    dist = np.linalg.norm(truth_p[after] - goal, axis=1)
-    result["min_true_goal_distance_m"] = float(dist.min())
-    # the end: PX4 holds, no failsafe
-    end_modes = [(main, sub, armed) for t, main, sub, armed in obs.modes if t >= t_exit]
-    result["modes_after_exit"] = sorted({f"{m}.{s}{'' if a else ' disarmed'}" for m, s, a in end_modes})
-    result["failsafe_texts"] = [(round(t - obs.offboard_t, 2), text.strip()) for t, text in obs.texts
-                                if "ailsafe" in text]
-    result["failsafe_texts_at_end"] = [text.strip() for t, text in obs.texts if "ailsafe" in text and t >= t_exit - 3.0]
+    result["min_true_goal_distance_m"] = summary["referee"]["truth"]["min_goal_distance_m"]
+    # the end: PX4 holds, no failsafe (the mode in force at the companion's exit and every change after)
+    # PX4 sends its HEARTBEAT at 1 Hz on each link on its own schedule: the player's (ground) link
+    # may show Hold up to a second after the companion's did, so the end is judged from then on
+    settled = t_exit + HEARTBEAT_LAG_S
+    before = [m for t, m in player.mode_changes if t <= settled]
+    end_modes = before[-1:] + [m for t, m in player.mode_changes if t > settled]
+    result["modes_after_exit"] = sorted(set(end_modes))
+    texts = player.texts
+    result["failsafe_texts"] = [(round(t - offboard_t, 2), text.strip()) for t, text in texts if "ailsafe" in text]
+    result["failsafe_texts_at_end"] = [text.strip() for t, text in texts if "ailsafe" in text and t >= t_exit - 3.0]
     # the setpoint stream as recorded: PX4 flags offboard loss after COM_OF_LOSS_T (1 s) without one
     from companion.mavlink.tlog import read_tlog
     sp_t = np.array([t for t, m in read_tlog(tlog) if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"])
     result["setpoints"] = int(sp_t.size)
     result["largest_setpoint_gap_s"] = round(float(np.diff(sp_t).max()), 2) if sp_t.size > 1 else None
-    result["px4_texts"] = [(round(t - obs.offboard_t, 2), text.strip()) for t, text in obs.texts]
-    result["companion_exit_after_offboard_s"] = round(t_exit - obs.offboard_t, 2)
-    result["holds_after_exit"] = bool(end_modes) and all((m, s) == (AUTO, LOITER) and a for m, s, a in end_modes)
+    result["px4_texts"] = [(round(t - offboard_t, 2), text.strip()) for t, text in texts]
+    result["companion_exit_after_offboard_s"] = round(t_exit - offboard_t, 2)
+    result["holds_after_exit"] = bool(end_modes) and all(m == HOLD for m in end_modes)
     # replay the recorded tlog
     rep = subprocess.run(_companion("replay", str(tlog), "--scenario", str(scenario), "--arm", "--takeoff-alt",
                                     str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--json", *extra),
@@ -168,13 +226,14 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
     result["ok"] = judge(result) == []
 
 
-
-def judge_safety(r: dict) -> list[str]:
+def judge_safety(r: dict, *, while_in_control: bool = False) -> list[str]:
     """The failed safety and hand-back checks of a run (empty when they held): no collision
-    in SIH's truth, and Hold without a failsafe after the companion stops."""
+    in SIH's truth (over the whole flight, or ``while_in_control``: until the companion
+    exited), and Hold without a failsafe after the companion stops."""
     bad = []
-    if r.get("min_true_clearance_m") is None or r["min_true_clearance_m"] <= 0.0:
-        bad.append(f"collision in truth: clearance {r.get('min_true_clearance_m')} m")
+    key = "min_true_clearance_in_control_m" if while_in_control else "min_true_clearance_m"
+    if r.get(key) is None or r[key] <= 0.0:
+        bad.append(f"collision in truth: {key} {r.get(key)} m")
     if not r.get("holds_after_exit") or r.get("failsafe_texts_at_end"):
         bad.append(f"end: modes {r.get('modes_after_exit')}, failsafe texts {r.get('failsafe_texts_at_end')}")
     return bad

@@ -27,7 +27,7 @@ TRUTH_PORT = 19410
 PARAMS = {"NAV_MC_ALT_RAD": 0.2}
 
 
-# The flight's processes (PX4, the companion and its planner, the world thread) run at this
+# The flight's processes (PX4, the companion and its planner, the traffic player) run at this
 # nice value where allowed: they are real-time processes, and on a shared 2-core machine at a
 # load of 15 the planner at nice 0 returned a plan every 0.6 s instead of every 0.3 s and the
 # drone flew stale plans into an obstacle. Set PX4_TEST_NICE=0 to run them at normal priority.

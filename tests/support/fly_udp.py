@@ -29,22 +29,29 @@ FLY_TIMEOUT_S = 120.0
 
 @dataclass
 class FlyRun:
-    """What one flight left: mavsim's simulator (its truth), fly's stdout and stderr, and fly's tlog."""
+    """What one flight left: mavsim's simulator (its truth), fly's stdout, stderr and exit code, and its tlog."""
 
     sim: Simulator
     out: str
     err: str
     tlog: Path
+    returncode: int
 
 
 def fly_beside_mavsim(scenario: Path, tmp_path: Path, *, autopilot_port: int, duration_s: float,
-                      extra_obstacle_ports: Sequence[int] = (), start_sender: Callable[[], None],
-                      stop_sender: Callable[[], None]) -> FlyRun:
+                      extra_obstacle_ports: Sequence[int] = (), start_sender: Callable[[], None] = lambda: None,
+                      stop_sender: Callable[[], None] = lambda: None,
+                      during: Callable[[subprocess.Popen, Simulator], None] | None = None,
+                      new_session: bool = False, fly_port: int | None = None) -> FlyRun:
     """Fly ``scenario`` with mavsim on ``autopilot_port`` while a sender runs; every wait bounded.
 
     mavsim's obstacles go to an obstacle link of their own; ``extra_obstacle_ports`` are
     further obstacle links of ``fly`` (for a sender). ``start_sender`` runs once fly's
     sockets are bound, ``stop_sender`` when fly has ended (it must join its thread).
+    ``during(fly, sim)`` runs after ``start_sender``, before waiting for fly to end (to signal
+    fly, or act on the simulated vehicle as a pilot would);
+    ``new_session`` puts fly in a process group of its own (its planning process with it).
+    ``fly_port``: the port fly listens on when it is not ``autopilot_port`` (a proxy between them).
     """
     sim_obstacle_port = free_udp_port()
     sim = Simulator(load_scenario(scenario), seed=0)
@@ -54,14 +61,16 @@ def fly_beside_mavsim(scenario: Path, tmp_path: Path, *, autopilot_port: int, du
     tlog = tmp_path / "fly.tlog"
     obstacles = [arg for p in (sim_obstacle_port, *extra_obstacle_ports) for arg in ("--obstacles", f"udpin:127.0.0.1:{p}")]
     fly = subprocess.Popen(
-        [sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{autopilot_port}",
+        [sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{fly_port or autopilot_port}",
          "--scenario", str(scenario), *obstacles,
          "--duration", str(duration_s), "--exit-after-goal", "1.0", "--tlog", str(tlog), "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=new_session)
     time.sleep(0.5)  # the companion's sockets are bound before mavsim sends
     serve.start()
     start_sender()
     try:
+        if during is not None:
+            during(fly, sim)
         out, err = fly.communicate(timeout=FLY_TIMEOUT_S)
     finally:
         stop_sender()
@@ -71,7 +80,7 @@ def fly_beside_mavsim(scenario: Path, tmp_path: Path, *, autopilot_port: int, du
         server.stop()
         serve.join(timeout=5)
         server.close()
-    return FlyRun(sim, out, err, tlog)
+    return FlyRun(sim, out, err, tlog, fly.returncode)
 
 
 def streamed_setpoints(tlog: Path) -> tuple[np.ndarray, np.ndarray]:

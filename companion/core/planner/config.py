@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -40,12 +39,24 @@ MAX_SCP_ITERATIONS = 100
 MAX_SOLVER_ITERATIONS = 100_000
 #: Largest ``replan_work_budget`` (ADMM iterations summed over a replan's QPs).
 MAX_WORK_BUDGET = 10_000_000
+#: Physical bounds of a multirotor, checked so that a typo flies nothing: the longest
+#: ``step_s`` and ``replan_period_s`` (s; a velocity command held longer than this is not
+#: a plan a vehicle can follow between obstacles: the shipped scenarios use 0.3 s, the
+#: paper's scenario 1 1.0 s), the largest per-axis speed (m/s; fast racing quadrotors
+#: reach 30 m/s, PX4's MPC_XY_VEL_MAX default is 12) and acceleration (m/s^2, about 2 g;
+#: PX4's MPC_ACC_HOR_MAX is at most 15).
+MAX_STEP_S = 5.0
+MAX_SPEED_MPS = 30.0
+MAX_ACCEL_MPS2 = 20.0
 
 
-def _axis_vector(name: str, value: Any) -> tuple[float, float, float]:
+def _axis_vector(name: str, value: Any, hi: float | None = None, unit: str = "") -> tuple[float, float, float]:
+    shown = list(value) if isinstance(value, tuple) else value
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         value = [value] * DIM
     arr = check.vector3(name, value, positive=True)
+    if hi is not None and np.any(arr > hi):
+        raise ConfigError(f"{name} = {shown!r} must be at most {hi:g} {unit} on every axis (a multirotor's)".rstrip())
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
@@ -76,9 +87,9 @@ class PlannerConfig:
     horizon_steps : int
         Number of velocity commands ``N``.
     step_s : float
-        Duration ``tau`` each command is held, seconds.
+        Duration ``tau`` each command is held, seconds, at most :data:`MAX_STEP_S` (5 s).
     replan_period_s : float
-        Receding-horizon replanning period, seconds (used by the control loop only).
+        Receding-horizon replanning period, seconds (used by the control loop only), at most 5 s.
     c_min : float
         Lower bound on the confidence contour of touch, in (0, 1). Maps to
         ``r_min = sqrt(chi2_3.ppf(c_min))`` and the overlap bound ``Y_max``.
@@ -86,10 +97,12 @@ class PlannerConfig:
         Optional upper bound (corridor case: the ``c_max`` contours keep touching);
         must exceed ``c_min``. Enforced softly, only for obstacles within sensing range.
     velocity_max_mps : (3,) floats
-        Per-axis speed bound (north, east, down), m/s: ``-v_max <= V <= v_max``.
+        Per-axis speed bound (north, east, down), m/s: ``-v_max <= V <= v_max``; at most
+        :data:`MAX_SPEED_MPS` (30 m/s).
     accel_max_mps2 : (3,) floats
         Per-axis acceleration bound, m/s^2: ``|V_i - V_{i-1}| <= a_max * tau``
-        (``V_0`` is the current velocity).
+        (``V_0`` is the current velocity); at most :data:`MAX_ACCEL_MPS2` (20 m/s^2), as is
+        ``accel_emergency_mps2``.
     accel_emergency_mps2 : (3,) floats or None
         Per-axis acceleration bound of the least-violation QPs, m/s^2 (at least
         ``accel_max_mps2``): when no plan within ``accel_max_mps2`` keeps every safety
@@ -212,7 +225,12 @@ class PlannerConfig:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
         check.choice("formulation", self.formulation, FORMULATIONS)
         set_("horizon_steps", check.integer("horizon_steps", self.horizon_steps, lo=2, hi=MAX_HORIZON_STEPS))
-        for name in ("step_s", "replan_period_s", "weight_terminal", "slack_penalty", "c_max_penalty", "scp_tolerance",
+        for name in ("step_s", "replan_period_s"):
+            value = check.number(name, getattr(self, name), positive=True)
+            if value > MAX_STEP_S:
+                raise ConfigError(f"{name} = {getattr(self, name)!r} must be at most {MAX_STEP_S:g} s")
+            set_(name, value)
+        for name in ("weight_terminal", "slack_penalty", "c_max_penalty", "scp_tolerance",
                      "scp_tolerance_warm", "trust_region_mps", "trust_region_lam", "solver_eps", "solver_rho"):
             set_(name, check.number(name, getattr(self, name), positive=True))
         for name in ("velocity_time_constant_s", "drone_radius_m", "weight_jerk", "weight_velocity", "weight_progress",
@@ -224,10 +242,11 @@ class PlannerConfig:
             set_("c_max", check.number("c_max", self.c_max, positive=True, below=1.0))
             if self.c_max <= self.c_min:
                 raise ConfigError(f"c_max = {self.c_max!r} must be greater than c_min = {self.c_min!r}")
-        set_("velocity_max_mps", _axis_vector("velocity_max_mps", self.velocity_max_mps))
-        set_("accel_max_mps2", _axis_vector("accel_max_mps2", self.accel_max_mps2))
+        set_("velocity_max_mps", _axis_vector("velocity_max_mps", self.velocity_max_mps, MAX_SPEED_MPS, "m/s"))
+        set_("accel_max_mps2", _axis_vector("accel_max_mps2", self.accel_max_mps2, MAX_ACCEL_MPS2, "m/s^2"))
         if self.accel_emergency_mps2 is not None:
-            set_("accel_emergency_mps2", _axis_vector("accel_emergency_mps2", self.accel_emergency_mps2))
+            set_("accel_emergency_mps2", _axis_vector("accel_emergency_mps2", self.accel_emergency_mps2,
+                                                      MAX_ACCEL_MPS2, "m/s^2"))
             if any(e < a for e, a in zip(self.accel_emergency_mps2, self.accel_max_mps2)):
                 raise ConfigError(f"accel_emergency_mps2 = {list(self.accel_emergency_mps2)} must be at least "
                                   f"accel_max_mps2 = {list(self.accel_max_mps2)} on every axis")

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.core.planner import qp_record
 from companion.core.planner.budget import WorkBudget
 from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import LAM_EPS, Formulation, ObstacleRows, relax_out_of_range
@@ -95,6 +96,8 @@ class QpWorkspace:
     a_slot, l, u : ``A`` data in slot order and the bounds, rewritten per QP.
     x0 : the primal start of the QP (the linearisation point, slacks 0).
     last_y : duals of the last QP solved for this shape (the next replan's warm start).
+    recorder : the QP recorder active when the workspace was made (None: none, the default;
+        :mod:`companion.core.planner.qp_record`).
     """
 
     def __init__(self, template: RequestTemplate) -> None:
@@ -106,6 +109,7 @@ class QpWorkspace:
         self.u = np.empty(layout.m)
         self.x0 = np.zeros(layout.n)
         self.last_y: np.ndarray | None = None
+        self.recorder = qp_record.ACTIVE
 
     def start(self, data: RequestData) -> None:
         """Reset the per-iteration vectors to the request's constants (start of a solve)."""
@@ -170,9 +174,12 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     # did: the corridor run then traded wall and c_min slack against the terminal cost
     # and touched a wall (measured).
     qp = ws.qp
+    if ws.recorder is not None:          # off by default (qp_record): tags the QPs recorded
+        ws.recorder.scp_step(first)
     if qp is None:
-        qp = ws.qp = OsqpQp(layout, data.p_data, data.q_hard, a_data, l, u, eps=cfg.solver_eps,
-                            eps_rel=cfg.solver_eps_rel, polish=cfg.solver_polish, rho=cfg.solver_rho)
+        make = OsqpQp if ws.recorder is None else ws.recorder.solver
+        qp = ws.qp = make(layout, data.p_data, data.q_hard, a_data, l, u, eps=cfg.solver_eps,
+                      eps_rel=cfg.solver_eps_rel, polish=cfg.solver_polish, rho=cfg.solver_rho)
     else:
         qp.update(p_data=data.p_data if first else None, q=data.q_hard, a_data=a_data, l=l, u=u)
     if first:

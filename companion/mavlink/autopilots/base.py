@@ -17,6 +17,7 @@ package to decode HEARTBEATs).
 from __future__ import annotations
 
 import enum
+from dataclasses import dataclass
 from typing import Protocol
 
 from pymavlink.dialects.v20 import common as mavlink2
@@ -36,9 +37,36 @@ class ModeRole(enum.Enum):
 
     OFFBOARD = "offboard"        # the companion's setpoints fly the vehicle
     HOLD = "hold"                # the autopilot hovers in place (where the companion hands back)
+    BRAKE = "brake"              # the autopilot stops at once and then holds (a hand-back choice)
     TAKEOFF = "takeoff"          # the autopilot's own take-off
     POSITION = "position"        # a pilot flies with position assistance
     OTHER = "other"              # anything else (manual, mission, return, land, unknown)
+
+
+@dataclass(frozen=True)
+class EngagementPlan:
+    """How an autopilot is engaged: the steps of the offboard sequence that differ between autopilots.
+
+    Attributes
+    ----------
+    wait_ready : bool
+        Command nothing (no arming, no mode) until :meth:`Autopilot.ready` says so from the
+        autopilot's estimator status (EKF_STATUS_REPORT flags).
+    mode_before_arming : bool
+        Request the offboard mode before arming and taking off: the autopilot takes off in
+        it (ArduCopter in GUIDED), and setpoints are streamed only after the takeoff.
+    takeoff_above_home : bool
+        MAV_CMD_NAV_TAKEOFF's param7 is metres above home (else metres AMSL, which needs
+        HOME_POSITION's altitude first).
+    takeoff_ends_by_height : bool
+        The takeoff is complete when the vehicle's own estimate holds the requested height
+        (else when the autopilot's takeoff mode ends in its hold mode).
+    """
+
+    wait_ready: bool = False
+    mode_before_arming: bool = False
+    takeoff_above_home: bool = False
+    takeoff_ends_by_height: bool = False
 
 
 class Autopilot(Protocol):
@@ -51,6 +79,14 @@ class Autopilot(Protocol):
     #: (message id, rate in Hz) the companion must ask for (MAV_CMD_SET_MESSAGE_INTERVAL)
     #: because the autopilot does not stream them to a companion by itself; empty if none.
     streams: tuple[tuple[int, float], ...]
+    #: The steps of its engagement that differ between autopilots.
+    engagement: EngagementPlan
+    #: Seconds of braking (stale estimate, no valid plan) after which the companion hands the
+    #: vehicle back when the scenario does not say (``[offboard] brake_hand_back_s``); None never.
+    brake_hand_back_s: float | None
+
+    def ready(self, estimator_flags: int) -> bool:
+        """Whether the vehicle may be armed and commanded, from EKF_STATUS_REPORT ``flags``."""
 
     def mode_name(self, custom_mode: int) -> str:
         """The autopilot's own name of a ``custom_mode`` (never raises)."""
@@ -59,10 +95,13 @@ class Autopilot(Protocol):
         """The role a ``custom_mode`` plays for the companion."""
 
     def custom_mode_of(self, role: ModeRole) -> int:
-        """The ``custom_mode`` the companion requests for ``role`` (OFFBOARD, HOLD or POSITION)."""
+        """The ``custom_mode`` the companion requests for ``role`` (OFFBOARD, HOLD, BRAKE or POSITION)."""
 
     def set_mode_params(self, custom_mode: int, armed: bool) -> tuple[float, ...]:
         """The parameters (param1, param2, ...) of MAV_CMD_DO_SET_MODE for ``custom_mode``."""
+
+    def takeoff_param7(self, height_m: float, home_alt_amsl_m: float | None) -> float:
+        """MAV_CMD_NAV_TAKEOFF's param7 for ``height_m`` above home (NaN when it cannot be formed yet)."""
 
 
 def is_armed(base_mode: int) -> bool:

@@ -22,11 +22,13 @@ from __future__ import annotations
 
 import enum
 import logging
+import math
 
 from companion.errors import InputError
 from companion.mavlink.autopilots.base import (
     MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
     MAV_MODE_FLAG_SAFETY_ARMED,
+    EngagementPlan,
     ModeRole,
     is_vehicle_autopilot,
 )
@@ -167,7 +169,8 @@ AUTO_RTL = encode_custom_mode(MainMode.AUTO, AutoSubMode.RTL)
 
 
 _ROLES = {OFFBOARD: ModeRole.OFFBOARD, AUTO_LOITER: ModeRole.HOLD, AUTO_TAKEOFF: ModeRole.TAKEOFF, POSCTL: ModeRole.POSITION}
-_REQUESTS = {ModeRole.OFFBOARD: OFFBOARD, ModeRole.HOLD: AUTO_LOITER, ModeRole.POSITION: POSCTL}
+#: PX4's Hold stops the vehicle and holds: it is also the hand-back for BRAKE.
+_REQUESTS = {ModeRole.OFFBOARD: OFFBOARD, ModeRole.HOLD: AUTO_LOITER, ModeRole.BRAKE: AUTO_LOITER, ModeRole.POSITION: POSCTL}
 
 
 class Px4Autopilot:
@@ -177,6 +180,14 @@ class Px4Autopilot:
     mav_autopilot = MAV_AUTOPILOT_PX4
     #: PX4 streams LOCAL_POSITION_NED, ODOMETRY, HOME_POSITION and HEARTBEAT on its onboard link by itself.
     streams: tuple[tuple[int, float], ...] = ()
+    #: Arm, AUTO.TAKEOFF (param7 AMSL) until it ends in Hold, then stream and request OFFBOARD.
+    engagement = EngagementPlan()
+    #: PX4 leaves OFFBOARD by itself when the stream stops; the companion brakes and streams on.
+    brake_hand_back_s: float | None = None
+
+    def ready(self, estimator_flags: int) -> bool:
+        """PX4 is commanded as soon as it is heard (it refuses to arm until it can fly)."""
+        return True
 
     def mode_name(self, custom_mode: int) -> str:
         return mode_name(custom_mode)
@@ -194,6 +205,10 @@ class Px4Autopilot:
 
     def set_mode_params(self, custom_mode: int, armed: bool) -> tuple[float, float, float]:
         return set_mode_params(custom_mode, armed)
+
+    def takeoff_param7(self, height_m: float, home_alt_amsl_m: float | None) -> float:
+        """Metres AMSL: home's altitude plus ``height_m`` (NaN without home: PX4 would climb to MIS_TAKEOFF_ALT)."""
+        return math.nan if home_alt_amsl_m is None else home_alt_amsl_m + height_m
 
 
 PX4 = Px4Autopilot()

@@ -32,6 +32,7 @@ from companion.offline.campaign.generate import (
     episode_rng,
     episode_sim_seed,
     generate_scenario,
+    profile_autopilot,
     random_covariance,
 )
 from companion.offline.campaign.results import CampaignResult, EpisodeResult
@@ -46,6 +47,6 @@ __all__ = [
     "ACTIVE_CONTOUR", "DEFAULT_DURATION_S", "EKF_CORRELATION_S", "FAMILIES", "METHODS", "NEES_95", "RADIUS_RANGE_M", "SPAWN_CLEARANCE_M",
     "SPEED_MAX_MPS", "VEHICLES", "CampaignResult", "EpisodeResult", "EpisodeScore", "EpisodeTask", "MethodSummary", "ResultsFile",
     "campaign_header", "clopper_pearson", "collision_bound", "episode_rng", "episode_sim_seed", "format_table",
-    "generate_scenario", "open_executor", "random_covariance", "run_campaign", "run_episode", "score_run",
+    "generate_scenario", "open_executor", "profile_autopilot", "random_covariance", "run_campaign", "run_episode", "score_run",
     "summarise", "to_toml", "write_scenario",
 ]

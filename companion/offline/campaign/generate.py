@@ -58,13 +58,20 @@ SENSING_RANGE_M = 10.0
 #: Velocity lag of the simulated vehicle, which the planner models too, seconds.
 VELOCITY_TIME_CONSTANT_S = 0.3
 #: mavsim's vehicle profiles (``[sim] vehicle``) a campaign can fly.
-VEHICLES = ("lag", "px4")
+VEHICLES = ("lag", "px4", "ardupilot")
 #: For each mavsim vehicle profile but ``lag``, the shipped scenario whose ``[planner]
 #: vehicle_response`` the planner uses against it: identified from a mavsim log by ``companion
 #: identify`` (never copied from mavsim's settings), so the test world does not agree with the
 #: planner by construction.
-PROFILE_SCENARIOS = {"px4": "antipodal_px4sim.toml"}
+PROFILE_SCENARIOS = {"px4": "antipodal_px4sim.toml", "ardupilot": "antipodal_ardupilotsim.toml"}
+#: The autopilot mavsim imitates (its personality, ``mavsim.personalities``) for each vehicle profile
+#: that is not PX4's: the ArduPilot profile flies mavsim's ArduPilot personality, so the companion
+#: engages it as it does ArduCopter (GUIDED, requested streams), not PX4's OFFBOARD.
+PROFILE_AUTOPILOTS = {"ardupilot": "ardupilot"}
 DEFAULT_DURATION_S = 40.0
+#: Longest episode, simulated seconds: an encounter is over in a minute or two; a longer
+#: one is a typo (``--duration 1e308``), and every run would fail or fly for hours.
+MAX_DURATION_S = 3600.0
 #: The honest noise model's correlation time, seconds (``--noise-correlation``): PX4's EKF2
 #: position estimate follows GNSS at low frequency (the IMU only smooths it between fixes),
 #: so its error wanders as a single-frequency receiver's does; measured autocorrelations of
@@ -99,6 +106,12 @@ def profile_response_state(vehicle: str) -> str | None:
     if vehicle not in PROFILE_SCENARIOS:
         return None
     return str(_profile_scenario(vehicle).get("companion", {}).get("response_state", "steady"))
+
+
+def profile_autopilot(vehicle: str) -> str | None:
+    """The autopilot mavsim imitates against the vehicle profile ``vehicle`` (:data:`PROFILE_AUTOPILOTS`);
+    None: mavsim's default (PX4)."""
+    return PROFILE_AUTOPILOTS.get(vehicle)
 
 
 def episode_rng(seed: int, index: int) -> np.random.Generator:
@@ -287,6 +300,8 @@ def generate_scenario(family: str, seed: int, index: int, *, c_min: float = 0.90
         data["sim"]["position_noise_correlation_s"] = float(noise_correlation_s)
         for ob in obstacles:
             ob["measurement_correlation_s"] = float(noise_correlation_s)
+        # the companion is configured for its sources, as an operator would for GNSS-positioned traffic
+        data.setdefault("estimator", {}).setdefault("tracker", {})["report_correlation_s"] = float(noise_correlation_s)
     if vehicle in PROFILE_SCENARIOS:
         del data["planner"]["velocity_time_constant_s"], data["sim"]["velocity_time_constant_s"]
         del data["sim"]["accel_max_mps2"]

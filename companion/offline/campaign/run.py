@@ -10,6 +10,7 @@ so a run gives the same result in this process, in a pool worker or on another m
 from __future__ import annotations
 
 import logging
+import math
 import os
 import signal
 import time
@@ -20,8 +21,8 @@ from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from companion.errors import ConfigError, InputError, LinkError
-from companion.offline.campaign.generate import (DEFAULT_DURATION_S, FAMILIES, METHODS, episode_sim_seed, generate_scenario,
-                                                profile_response_state)
+from companion.offline.campaign.generate import (DEFAULT_DURATION_S, FAMILIES, MAX_DURATION_S, METHODS, episode_sim_seed,
+                                                generate_scenario, profile_autopilot, profile_response_state)
 from companion.offline.campaign.progress import Progress
 from companion.offline.campaign.results import CampaignResult, EpisodeResult
 from companion.offline.campaign.score import score_run
@@ -35,6 +36,18 @@ logger = logging.getLogger(__name__)
 STOP_AFTER_GOAL_S = 0.5
 #: Seconds to wait for a Dask scheduler to answer.
 SCHEDULER_TIMEOUT_S = 20.0
+#: Most episodes in one campaign (``--episodes``; the indices of ``--episode``): the
+#: campaign holds every run's key and result in memory, and 100,000 episodes of four
+#: methods at about 10 s each are already weeks of one core.
+MAX_EPISODES = 100_000
+#: Most local worker processes per CPU (``--workers``): a run is CPU-bound, so more processes
+#: than CPUs only share them, and each worker holds its own numpy, OSQP and mavsim.
+WORKERS_PER_CPU = 4
+
+
+def max_workers() -> int:
+    """The most local worker processes a campaign starts: :data:`WORKERS_PER_CPU` per CPU."""
+    return WORKERS_PER_CPU * (os.cpu_count() or 1)
 
 
 @dataclass(frozen=True)
@@ -63,11 +76,14 @@ def run_episode(task: EpisodeTask, *, keep_records: bool = False) -> EpisodeResu
     try:
         data = generate_scenario(task.family, task.seed, task.index, c_min=task.c_min, duration_s=task.duration_s,
                                  noise_correlation_s=task.noise_correlation_s, vehicle=task.vehicle)
-        run = run_lockstep(data, seed=key["sim_seed"], stop_after_goal_s=STOP_AFTER_GOAL_S, formulation=task.method)
+        run = run_lockstep(data, seed=key["sim_seed"], stop_after_goal_s=STOP_AFTER_GOAL_S, formulation=task.method,
+                           autopilot=profile_autopilot(task.vehicle))
         return EpisodeResult(**key, score=score_run(run, data), wall_time_s=time.perf_counter() - t0,
                              run=run if keep_records else None)
     except Exception as exc:  # one bad episode must not end a campaign of hundreds
-        logger.exception("episode %d method %s failed", task.index, task.method)
+        # one line per failed run (a campaign may fail hundreds); the traceback with -vv
+        logger.error("episode %d method %s failed: %s: %s", task.index, task.method, type(exc).__name__, exc)
+        logger.debug("episode %d method %s failed", task.index, task.method, exc_info=True)
         return EpisodeResult(**key, error=f"{type(exc).__name__}: {exc}", wall_time_s=time.perf_counter() - t0)
 
 
@@ -181,7 +197,8 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
         runs only the missing ones.
     scheduler : address of a Dask distributed scheduler to run the episodes on.
     noise_correlation_s : correlation time of mavsim's drone position error and obstacle measurement errors (s; 0: white).
-    vehicle : mavsim's vehicle profile, ``"lag"`` or ``"px4"`` (see :func:`generate_scenario`).
+    vehicle : mavsim's vehicle profile, ``"lag"``, ``"px4"`` or ``"ardupilot"`` (see :func:`generate_scenario`);
+        ``"ardupilot"`` also flies mavsim's ArduPilot personality (:func:`profile_autopilot`).
     """
     if family not in FAMILIES:
         raise InputError(f"unknown campaign family {family!r} (known: {', '.join(FAMILIES)})")
@@ -189,14 +206,22 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
     if unknown or not methods:
         raise InputError(f"unknown method(s) {', '.join(unknown) or '(none given)'} (known: {', '.join(METHODS)})")
     episodes, methods = tuple(episodes), tuple(methods)
+    if len(episodes) > MAX_EPISODES or any(not 0 <= i < MAX_EPISODES for i in episodes):
+        raise InputError(f"a campaign has at most {MAX_EPISODES} episodes, indices 0 to {MAX_EPISODES - 1}")
+    if not (math.isfinite(duration_s) and 0.0 < duration_s <= MAX_DURATION_S):
+        raise InputError(f"duration_s = {duration_s!r} must be > 0 and at most {MAX_DURATION_S:g} s")
+    if workers is not None and not 1 <= workers <= max_workers():
+        raise InputError(f"workers = {workers!r} must be from 1 to {max_workers()} "
+                         f"({WORKERS_PER_CPU} per CPU, {os.cpu_count() or 1} CPUs)")
     workers = workers or os.cpu_count() or 1
     keys = [(i, m) for i in episodes for m in methods]
     response_state = profile_response_state(vehicle)
     store = (ResultsFile(results_path, campaign_header(family, seed, c_min, duration_s, noise_correlation_s, vehicle,
-                                                       response_state), resume=resume)
+                                                       response_state, profile_autopilot(vehicle)), resume=resume)
              if results_path is not None else None)
     in_memory: dict[tuple[int, str], EpisodeResult] = {}
     todo = [EpisodeTask(family, seed, i, m, c_min, duration_s, noise_correlation_s, vehicle) for i, m in keys if store is None or (i, m) not in store]
+    workers = max(1, min(workers, len(todo)))  # a pool never starts more processes than there are runs
     mode = "auto" if progress is None or progress is True else ("off" if progress is False else progress)
     bar = Progress(f"campaign {family}", len(keys), len(keys) - len(todo), mode=mode)
     t0 = time.perf_counter()

@@ -105,6 +105,9 @@ class MethodSummary:
     solve_time_median_ms: float | None
     solve_time_p99_ms: float | None
     min_realised_contour: list[float | None]  #: one per episode (None: nothing came within range)
+    #: episodes with a true contact (``collisions``) in contact at no replan instant: a contact
+    #: shorter than a replan period, or with a wall; in ``collisions``, not in ``pair_step_collisions``
+    collisions_between_steps: int = 0
 
     def to_json(self) -> dict:
         """Plain JSON values (intervals as lists, non-finite numbers as ``None``)."""
@@ -198,5 +201,6 @@ def summarise(results: Sequence[Any], methods: Sequence[str], c_min: float) -> d
             solve_time_median_ms=float(np.median(solve) * 1e3) if solve.size else None,
             solve_time_p99_ms=float(np.percentile(solve, 99) * 1e3) if solve.size else None,
             min_realised_contour=[r.min_realised_contour for r in rows],
+            collisions_between_steps=sum(bool(r.collided) and not r.pair_step_collisions for r in rows),
         )
     return out

@@ -23,7 +23,7 @@ def _fmt(x: Any, spec: str) -> str:
 def format_table(result: CampaignResult) -> str:
     """The terminal table: one row per method."""
     bound = collision_bound(result.c_min)
-    head = (f"{'method':<14}{'eps':>5}{'coll':>5}  {'rate [95% CI]':<22}{'step freq [95% CI]':<28}"
+    head = (f"{'method':<14}{'eps':>5}{'hit eps':>8}  {'rate [95% CI]':<22}{'step hits':>9}  {'step freq [95% CI]':<28}"
             f"{'<c_min':>8}{'goal':>7}{'t_goal':>8}{'failed':>8}{'slack':>7}{'solve med/p99 ms':>18}")
     lines = [f"campaign {result.family}, seed {result.seed}, {len(result.episodes)} episodes, c_min = {result.c_min:.2f}: "
              f"bound Phi(-r_min) = {bound:.4g} per step and obstacle (r_min = {float(touch_radius(result.c_min, 3)):.4f})",
@@ -34,7 +34,7 @@ def format_table(result: CampaignResult) -> str:
         rate = f"{_fmt(s.collision_rate, '.3f')} [{lo:.3f}, {hi:.3f}]"
         step = f"{_fmt(s.pair_step_frequency, '.2e')} [{plo:.1e}, {phi:.1e}]"
         lines.append(
-            f"{m:<14}{s.episodes:>5}{s.collisions:>5}  {rate:<22}{step:<28}"
+            f"{m:<14}{s.episodes:>5}{s.collisions:>8}  {rate:<22}{s.pair_step_collisions:>9}  {step:<28}"
             f"{_fmt(s.share_pairs_below_c_min, '8.4f')}{_fmt(s.goal_rate, '7.3f')}{_fmt(s.time_to_goal_median_s, '8.1f')}"
             f"{_fmt(s.failed_share, '8.4f')}{s.episodes_with_slack:>7}"
             f"{_fmt(s.solve_time_median_ms, '9.1f')}/{_fmt(s.solve_time_p99_ms, '<8.1f')}"
@@ -54,7 +54,9 @@ def format_table(result: CampaignResult) -> str:
     lines.append(f"(near: (step, obstacle) pairs with realised contour < {ACTIVE_CONTOUR}; E[coll] bound: sum over pairs of "
                  f"Phi(-r(realised contour)); contact share: seconds in true contact per in-range obstacle-second; NEES: 3 and 5 % above the chi2_3 95 % quantile if the filters are consistent; "
                  f"step err: true displacement over one step minus tau * V_1)")
-    lines.append(f"(step freq: true collisions per step and in-range obstacle; <c_min: share of in-range (step, obstacle) "
+    lines.append(f"(hit eps: episodes with a true contact at any physics step, with an obstacle or a wall; rate: their share; "
+                 f"step hits: in-range (step, obstacle) pairs in true contact at the replan instant; step freq: step hits per "
+                 f"in-range (step, obstacle) pair, the quantity the bound Phi(-r_min) is about; <c_min: share of in-range (step, obstacle) "
                  f"pairs whose realised contour of touch fell below c_min; failed: share of replans; slack: episodes "
                  f"with slack; {result.wall_time_s:.0f} s on {result.workers} worker(s))")
     for m, s in result.summary.items():
@@ -65,6 +67,11 @@ def format_table(result: CampaignResult) -> str:
                     f"against {b.promised_mean:.1e}" for b in used if b.exceeds_promise]
             lines.append(f"{m}: {what} against truth over {sum(b.pairs for b in used)} pairs, {sum(b.hits for b in used)} hit(s): "
                          f"observed/promised = {_fmt(ratio, '.3g')}; bins above their promise: {'; '.join(over) or 'none'}")
+    for m, s in result.summary.items():
+        if s.collisions:
+            lines.append(f"{m}: {s.collisions} episode(s) with a true contact ({s.obstacle_collisions} with an obstacle), "
+                         f"{s.collisions_between_steps} of them in contact at no replan instant (a contact between two "
+                         f"replans, or with a wall): in hit eps, not in step hits")
     for m, s in result.summary.items():
         if s.slack_plans:
             lines.append(f"{m}: {s.slack_plans} slack replan(s) in {s.episodes_with_slack} episode(s), accepted and flagged; "

@@ -1,0 +1,1 @@
+"""Obstacle intake: traffic from every link, each source on its own clock, onto the tracks."""

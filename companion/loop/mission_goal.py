@@ -1,0 +1,280 @@
+"""A mission as a goal source: its NAV_WAYPOINT items flown in order, progress kept on the autopilot.
+
+:class:`MissionGoal` gets its items from a file (:mod:`companion.loop.mission_file`; uploaded
+to the vehicle first, so the autopilot's mission is the one flown) or from the vehicle
+(downloaded), with the mission protocol's state machines
+(:mod:`companion.mavlink.mission_protocol`). Before it is ready the offboard sequence does not
+start (``prepare``, :mod:`companion.loop.goal`): the transfer runs, then the items are placed
+in the local frame through the vehicle's GPS_GLOBAL_ORIGIN (and HOME_POSITION for
+altitudes relative to home), as :class:`~companion.loop.goal.PlacedGoal` places one goal.
+
+In flight, the planner's target runs along the current leg (from where the previous
+waypoint was reached, or where the companion took over) ``waypoint_spacing_m`` ahead of
+the drone; a waypoint counts as reached within its acceptance radius (the item's param2;
+``goal_tolerance_m`` when 0), and is then announced (STATUSTEXT) and the autopilot's
+current item set to the next one (MISSION_SET_CURRENT); the last waypoint ends the
+mission (the loop's "goal reached"). What it does not fly itself:
+
+- NAV_TAKEOFF: its altitude (above home) becomes the engage sequence's take-off when the
+  companion arms and no take-off altitude was given;
+- a final NAV_LAND or NAV_RETURN_TO_LAUNCH: the command sent to the autopilot once the
+  vehicle has been handed back (Hold) after the last waypoint (:attr:`final_command`);
+- anything else (loiters, DO_CHANGE_SPEED and other DO_ items, a LAND or RTL that is not
+  last): skipped, listed in :attr:`skipped` and said once (not yet supported).
+
+Pure: link time (s) comes in as an argument.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.loop.config import GOAL_BELOW_ORIGIN_MAX_M, MissionConfig
+from companion.loop.goal import Preparation
+from companion.loop.goal_frames import GoalSpec, place
+from companion.loop.mission_file import MissionPlan, check_items
+from companion.loop.vehicle_reference import VehicleReference
+from companion.errors import ConfigError
+from companion.mavlink import messages
+from companion.mavlink.mission_protocol import (
+    RELATIVE_FRAMES, MissionDownload, MissionItem, MissionUpload, set_current)
+
+logger = logging.getLogger(__name__)
+
+#: The autopilot's messages of the mission protocol (routed to the mission while it runs).
+MISSION_MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT",
+                              "MISSION_REQUEST", "MISSION_ACK"})
+_FINAL = {mavlink2.MAV_CMD_NAV_LAND: "land", mavlink2.MAV_CMD_NAV_RETURN_TO_LAUNCH: "return"}
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """A NAV_WAYPOINT placed in the local frame: its item's seq, position (NED, m) and acceptance radius (m)."""
+
+    seq: int
+    position: np.ndarray
+    acceptance_m: float
+
+
+class MissionGoal:
+    """The waypoints of a mission, flown in order (see the module docstring).
+
+    Parameters
+    ----------
+    mission : MissionConfig
+        ``goal_tolerance_m`` (acceptance where an item sets none), ``waypoint_spacing_m``,
+        ``goal_wait_s`` (how long the origin and home are waited for).
+    reference : VehicleReference
+        The vehicle's origin and home (shared with the obstacle intake).
+    plan : MissionPlan, optional
+        The mission from a file; None downloads the vehicle's.
+    upload : bool
+        Upload ``plan`` to the vehicle before flying it (default); False flies it as read.
+    """
+
+    MISSION_MESSAGES = MISSION_MESSAGES
+
+    def __init__(self, mission: MissionConfig, reference: VehicleReference, plan: MissionPlan | None = None, *,
+                 upload: bool = True) -> None:
+        self.mission, self.reference, self.plan = mission, reference, plan
+        self.upload = upload and plan is not None
+        self.items: list[MissionItem] | None = list(plan.items) if plan is not None and not self.upload else None
+        self.transfer: MissionDownload | MissionUpload | None = None
+        self.waypoints: list[Waypoint] = []
+        self.index = 0                                  #: the waypoint flown to now
+        self.takeoff_alt_m: float | None = None         #: a NAV_TAKEOFF item's altitude above home
+        self.final_command: int | None = None           #: a last NAV_LAND / NAV_RETURN_TO_LAUNCH
+        self.skipped: list[tuple[int, int]] = []        #: (seq, command) of items not flown
+        #: waypoints reached, as (link time s, item seq), in order
+        self.reached_items: list[tuple[float, int]] = []
+        self.failed: str | None = None
+        self.route_start: np.ndarray | None = None
+        self._target: tuple[int, int] | None = None
+        self._wait_from: float | None = None
+        self._newly_reached: list[int] = []
+        self._current_sent = False
+        self._final_sent = False
+
+    # ------------------------------------------------------------------ GoalSource
+
+    @property
+    def goal(self) -> np.ndarray | None:
+        return self.waypoints[self.index].position if self.waypoints else None
+
+    def start(self, position: np.ndarray) -> None:
+        if self.route_start is None:
+            self.route_start = np.asarray(position, dtype=float).copy()
+
+    def target(self, position: np.ndarray) -> np.ndarray:
+        if not self.waypoints:
+            return np.asarray(position, dtype=float).copy()
+        while self.index < len(self.waypoints) - 1 and self._within(position, self.waypoints[self.index]):
+            self._reach(position)
+        goal = self.waypoints[self.index].position
+        start = self.route_start if self.route_start is not None else position
+        route = goal - start
+        length = float(np.linalg.norm(route))
+        if length < 1e-9:
+            return goal.copy()
+        along = float(np.dot(position - start, route) / length)
+        s = min(length, max(0.0, along) + self.mission.waypoint_spacing_m)
+        return start + route * (s / length)
+
+    def reached(self, position: np.ndarray) -> bool:
+        if not self.waypoints or self.index < len(self.waypoints) - 1:
+            return False
+        if len(self.reached_items) + len(self._newly_reached) == len(self.waypoints):
+            return True
+        if self._within(position, self.waypoints[-1]):
+            self._newly_reached.append(self.waypoints[-1].seq)
+            return True
+        return False
+
+    def _within(self, position: np.ndarray, wp: Waypoint) -> bool:
+        return bool(np.linalg.norm(np.asarray(position) - wp.position) <= wp.acceptance_m)
+
+    def _reach(self, position: np.ndarray) -> None:
+        wp = self.waypoints[self.index]
+        self._newly_reached.append(wp.seq)
+        self.route_start = wp.position.copy()   # the next leg starts at the waypoint, as the autopilot flies it
+        self.index += 1
+
+    # ------------------------------------------------------------------ preparation
+
+    def on_message(self, t_s: float, msg) -> list:
+        """The autopilot's MISSION_* messages while a transfer runs; the answers to send at once."""
+        if self.transfer is None or self.transfer.over:
+            return []
+        out = self.transfer.on_message(t_s, msg)
+        return out
+
+    def prepare(self, t_s: float, autopilot: tuple[int, int] | None) -> Preparation:
+        """Transfer, then place the mission (see the module docstring)."""
+        if self.waypoints:
+            return Preparation(True)
+        if self.failed is not None or autopilot is None:
+            return Preparation(False)
+        self._target = autopilot
+        if self.items is None:
+            return self._transfer(t_s, autopilot)
+        return self._place(t_s)
+
+    def _transfer(self, t_s: float, autopilot: tuple[int, int]) -> Preparation:
+        if self.transfer is None:
+            if self.upload:
+                assert self.plan is not None
+                self.transfer = MissionUpload(autopilot, list(self.plan.items))
+                text = f"companion: uploading mission, {len(self.plan.items)} items"
+            else:
+                self.transfer = MissionDownload(autopilot)
+                text = "companion: downloading the vehicle's mission"
+            logger.info("%s", text)
+            return Preparation(False, [(mavlink2.MAV_SEVERITY_INFO, text)], send=self.transfer.start(t_s))
+        send = self.transfer.step(t_s)
+        if self.transfer.failed is not None:
+            return self._fail(self.transfer.failed, "companion: mission transfer failed")
+        if not self.transfer.done:
+            return Preparation(False, send=send)
+        if isinstance(self.transfer, MissionDownload):
+            self.items = list(self.transfer.items)
+            try:
+                check_items("the vehicle's mission", self.items)
+            except ConfigError as exc:
+                return self._fail(str(exc), "companion: vehicle mission not flyable")
+        else:
+            self.items = list(self.transfer.items)
+        return self._place(t_s)
+
+    def _place(self, t_s: float) -> Preparation:
+        assert self.items is not None
+        needs_home = any(item.frame in RELATIVE_FRAMES for item in self.items)
+        origin, home = self.reference.origin_point, self.reference.home
+        if origin is None or (needs_home and home is None):
+            self.reference.origin_request.wanted = origin is None
+            self.reference.home_request.wanted = needs_home and home is None
+            missing = " and ".join(n for n, gone in (("GPS_GLOBAL_ORIGIN", origin is None),
+                                                     ("HOME_POSITION", needs_home and home is None)) if gone)
+            if self._wait_from is None:
+                self._wait_from = t_s
+                return Preparation(False, [(mavlink2.MAV_SEVERITY_NOTICE, f"companion: mission waits for {missing}"[:50])])
+            if t_s - self._wait_from >= self.mission.goal_wait_s - 1e-9:
+                self.reference.origin_request.wanted = self.reference.home_request.wanted = False
+                return self._fail(f"mission not placed: no {missing} from the autopilot after {self.mission.goal_wait_s:g} s",
+                                  f"companion: mission not placed, no {missing}"[:50])
+            return Preparation(False)
+        waypoints: list[Waypoint] = []
+        last = len(self.items) - 1
+        for item in self.items:
+            if item.command == mavlink2.MAV_CMD_NAV_WAYPOINT:
+                spec = GoalSpec("geo", (item.x, item.y, item.z), "rel" if item.frame in RELATIVE_FRAMES else "amsl")
+                ned = place(spec, origin, home)
+                assert ned is not None
+                if ned[2] > GOAL_BELOW_ORIGIN_MAX_M:
+                    return self._fail(f"mission item {item.seq}: {ned[2]:.1f} m below the local origin (under the ground "
+                                      f"at home)", "companion: mission item below ground")
+                acceptance = item.params[1] if item.params[1] > 0.0 else self.mission.goal_tolerance_m
+                waypoints.append(Waypoint(item.seq, ned, float(acceptance)))
+            elif item.command == mavlink2.MAV_CMD_NAV_TAKEOFF and not waypoints:
+                self.takeoff_alt_m = item.z if item.frame in RELATIVE_FRAMES else item.z - (home.point.alt_m if home else origin.alt_m)
+            elif item.command in _FINAL and item.seq == last:
+                self.final_command = item.command
+            else:
+                self.skipped.append((item.seq, item.command))
+        if not waypoints:
+            return self._fail("the mission has no NAV_WAYPOINT item to fly", "companion: mission has no waypoint")
+        self.waypoints = waypoints
+        said = [(mavlink2.MAV_SEVERITY_INFO, f"companion: mission of {len(waypoints)} waypoints placed")]
+        logger.info("mission placed: %s", [(w.seq, np.round(w.position, 2).tolist(), w.acceptance_m) for w in waypoints])
+        if self.skipped:
+            logger.warning("mission items not flown (not supported yet): %s", self.skipped)
+            said.append((mavlink2.MAV_SEVERITY_NOTICE, f"companion: {len(self.skipped)} mission items skipped"))
+        return Preparation(True, said)
+
+    def _fail(self, reason: str, short: str) -> Preparation:
+        self.failed = reason
+        logger.error("%s", reason)
+        return Preparation(False, [(mavlink2.MAV_SEVERITY_WARNING, short[:50])], failed=reason)
+
+    # ------------------------------------------------------------------ progress
+
+    def take_outbound(self, t_s: float, engaged: bool, held: bool) -> tuple[list, list[tuple[int, str]]]:
+        """What the mission sends and says at link time ``t_s``: the first waypoint made current once
+        engaged, each reached waypoint announced with the next made current, and the final LAND
+        or RTL once the vehicle is held after the last waypoint."""
+        out: list = []
+        said: list[tuple[int, str]] = []
+        if self._target is None or not self.waypoints:
+            return out, said
+        if engaged and not self._current_sent:
+            self._current_sent = True
+            out.append(set_current(self.waypoints[0].seq, self._target))
+        for seq in self._newly_reached:
+            self.reached_items.append((t_s, seq))
+            said.append((mavlink2.MAV_SEVERITY_INFO, f"companion: mission item {seq} reached"))
+            following = [w.seq for w in self.waypoints if w.seq > seq]
+            nxt = following[0] if following else (seq + 1 if seq + 1 < len(self.items or ()) else None)
+            if nxt is not None:
+                out.append(set_current(nxt, self._target))
+        self._newly_reached = []
+        done = len(self.reached_items) == len(self.waypoints)
+        if done and held and self.final_command is not None and not self._final_sent:
+            self._final_sent = True
+            name = _FINAL[self.final_command]
+            said.append((mavlink2.MAV_SEVERITY_INFO, f"companion: mission ends, {name} (autopilot)"))
+            out.append(messages.command_long(self.final_command, (), target_system=self._target[0],
+                                             target_component=self._target[1]))
+        return out, said
+
+    def summary(self) -> dict:
+        """For the run report: the items reached (seq, link time) and those not flown."""
+        return {
+            "mission_items_reached": [seq for _, seq in self.reached_items],
+            "mission_items_reached_t_s": [t for t, _ in self.reached_items],
+            "mission_waypoints": len(self.waypoints),
+            "mission_items_skipped": [seq for seq, _ in self.skipped],
+            "mission_final": _FINAL.get(self.final_command) if self.final_command else None,
+        }

@@ -1,0 +1,221 @@
+"""Start and stop ArduCopter SITL for the ``make ardupilot-test`` suite.
+
+The build is ``ARDUPILOT_SITL_DIR`` or ``../shared/ardupilot-sitl`` from the repository root: either
+the unpacked ``arducopter-sitl/`` (``bin/arducopter``) or the directory holding ``start-arducopter``
+and ``arducopter-sitl.tar.gz``, which is then unpacked to a temporary directory once per session.
+``start-arducopter RUN_DIR -I N`` starts instance N: its companion link (SERIAL2) sends to
+127.0.0.1:(14540+N), its ground-station link (SERIAL0) to 127.0.0.1:(14550+N), both from ephemeral
+ports. :func:`free_instance` picks an N >= 3 whose ports are free (PX4 SITL uses 14540/14550/14580).
+Readiness (the EKF's absolute position) takes about 42 s after the start; the companion waits for it.
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import tarfile
+import tempfile
+import time
+from pathlib import Path
+
+logger = logging.getLogger(__name__)
+
+REPO = Path(__file__).resolve().parents[2]
+SCRIPT = "start-arducopter"
+#: 0..2 are left to PX4 SITL and others (14540..14542); ARDUPILOT_SITL_FIRST_INSTANCE raises it
+#: (a machine where other sessions fly instances 3 and 4)
+FIRST_INSTANCE = int(os.environ.get("ARDUPILOT_SITL_FIRST_INSTANCE", "3"))
+_unpacked: Path | None = None
+
+
+def _shared() -> Path:
+    env = os.environ.get("ARDUPILOT_SITL_DIR")
+    path = Path(env) if env else REPO.parent / "shared" / "ardupilot-sitl"
+    return path if path.is_absolute() else REPO / path
+
+
+def _script() -> Path | None:
+    """``start-arducopter``: in ARDUPILOT_SITL_DIR, beside it, or in ../shared/ardupilot-sitl."""
+    base = _shared()
+    for cand in (base / SCRIPT, base.parent / SCRIPT, REPO.parent / "shared" / "ardupilot-sitl" / SCRIPT):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def build_dir() -> Path | None:
+    """The unpacked ``arducopter-sitl`` directory (``bin/arducopter``), unpacking the tarball to a
+    temporary directory when only it is there; None when there is no build."""
+    global _unpacked
+    base = _shared()
+    for cand in (base, base / "arducopter-sitl"):
+        if (cand / "bin" / "arducopter").is_file():
+            return cand
+    tarball = base / "arducopter-sitl.tar.gz"
+    if not tarball.is_file():
+        return None
+    if _unpacked is None:
+        tmp = Path(tempfile.mkdtemp(prefix="arducopter-sitl-"))
+        with tarfile.open(tarball) as tar:
+            tar.extractall(tmp, filter="data")
+        atexit.register(shutil.rmtree, tmp, True)
+        _unpacked = tmp / "arducopter-sitl"
+    return _unpacked
+
+
+def available() -> bool:
+    return _script() is not None and build_dir() is not None
+
+
+def _udp_free(port: int) -> bool:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        s.bind(("127.0.0.1", port))
+        return True
+    except OSError:
+        return False
+    finally:
+        s.close()
+
+
+def _tcp_free(port: int) -> bool:
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        s.bind(("0.0.0.0", port))
+        return True
+    except OSError:
+        return False
+    finally:
+        s.close()
+
+
+def free_instance() -> int:
+    """The first instance N >= :data:`FIRST_INSTANCE` whose UDP ports 14540+N, 14550+N and RC 5501+10N
+    and TCP 5762+10N are free."""
+    for n in range(FIRST_INSTANCE, 10):
+        if all(_udp_free(p) for p in (14540 + n, 14550 + n, 5501 + 10 * n)) and _tcp_free(5762 + 10 * n):
+            return n
+    raise RuntimeError(f"no free ArduCopter SITL instance ({FIRST_INSTANCE}..9): ports 1454{FIRST_INSTANCE}..14549 / "
+                       f"1455{FIRST_INSTANCE}..14559 in use")
+
+
+def free_udp_port() -> int:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+class CentredSticks:
+    """A pilot's transmitter with its sticks at rest: RC input to SITL instance ``instance`` (UDP
+    127.0.0.1:5501+10N, 8 x uint16 PWM per datagram, :data:`RATE_HZ`), a context manager.
+
+    SITL's own RC input without a sender is ArduPilot's default: sticks centred, throttle 1000
+    (down), mode channel 1800. In LOITER (the hand-back) throttle is the pilot's climb rate, so a
+    throttle held down descends and lands: measured, "SIM Hit ground at 2.44 m/s" 3.3 s after the
+    companion handed a vehicle at 5 m back to LOITER. A pilot ready to take over holds the
+    throttle at mid (1500): LOITER holds the altitude there. The other channels keep SITL's values.
+    Call :meth:`start` once airborne: arming with the throttle at mid is refused (the companion
+    gave up after 11 attempts when the sticks were sent from the SITL's start).
+    """
+
+    PWM = (1500, 1500, 1500, 1500, 1800, 1000, 1000, 1800)
+    RATE_HZ = 50.0
+
+    def __init__(self, instance: int) -> None:
+        import threading
+
+        self.address = ("127.0.0.1", 5501 + 10 * int(instance))
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="centred-sticks", daemon=True)
+
+    def _run(self) -> None:
+        import struct
+
+        packet = struct.pack(f"<{len(self.PWM)}H", *self.PWM)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            while not self._stop.wait(1.0 / self.RATE_HZ):
+                sock.sendto(packet, self.address)
+
+    def start(self) -> None:
+        if not self._thread.is_alive() and not self._stop.is_set():
+            self._thread.start()
+
+    def __enter__(self) -> CentredSticks:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=1.0)
+
+
+class Sitl:
+    """ArduCopter SITL instance ``instance`` in ``run_dir``; a context manager that always stops it."""
+
+    def __init__(self, run_dir: str | os.PathLike, instance: int, params: dict[str, float] | None = None,
+                 companion_device: str | None = None) -> None:
+        script, build = _script(), build_dir()
+        if script is None or build is None:
+            raise RuntimeError("no ArduCopter SITL build: set ARDUPILOT_SITL_DIR or put one at ../shared/ardupilot-sitl")
+        self.script, self.build = script, build
+        self.run_dir, self.instance = Path(run_dir), int(instance)
+        self.params = dict(params or {})
+        self.companion_device = companion_device
+        self.pid: int | None = None
+
+    @property
+    def companion_port(self) -> int:
+        return 14540 + self.instance
+
+    @property
+    def gcs_port(self) -> int:
+        return 14550 + self.instance
+
+    def __enter__(self) -> Sitl:
+        env = {**os.environ, "ARDUPILOT_SITL_DIR": str(self.build)}
+        if self.params:
+            env["ARDUCOPTER_PARAMS"] = " ".join(f"{k}={v}" for k, v in self.params.items())
+        if self.companion_device:
+            env["ARDUCOPTER_COMPANION"] = self.companion_device
+        out = subprocess.run([str(self.script), str(self.run_dir), "-I", str(self.instance)], check=True,
+                             capture_output=True, text=True, timeout=60, env=env)
+        self.pid = int(out.stdout.strip().splitlines()[-1])
+        logger.info("ArduCopter SITL instance %d started, pid %d, in %s", self.instance, self.pid, self.run_dir)
+        return self
+
+    def alive(self) -> bool:
+        if self.pid is None:
+            return False
+        try:
+            os.kill(self.pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+
+    def stop(self) -> None:
+        """SIGTERM, then SIGKILL after 5 s; safe to call twice."""
+        if self.pid is None:
+            return
+        pid, self.pid = self.pid, None
+        for sig, wait_s in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 2.0)):
+            try:
+                os.kill(pid, sig)
+            except ProcessLookupError:
+                return
+            deadline = time.monotonic() + wait_s
+            while time.monotonic() < deadline:
+                try:
+                    os.kill(pid, 0)
+                except ProcessLookupError:
+                    return
+                time.sleep(0.1)
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
