@@ -35,6 +35,7 @@ STAGES: dict[str, list[str]] = {
     "realtime": ["-m", "realtime and not quarantine"],
     "px4": ["-s", "-m", "px4 and not quarantine", "tests/px4"],
     "quarantine": ["-m", "quarantine"],
+    "ardupilot": ["-s", "-m", "ardupilot and not ardupilot_adsb", "tests/ardupilot"],
 }
 
 
