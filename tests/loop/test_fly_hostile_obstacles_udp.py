@@ -37,13 +37,22 @@ def _cov(var: float) -> list[float]:
     return cov
 
 
+#: Ring systems that send each round's report twice, 50 ms older first: at any speed of the machine
+#: the older one waits in the stream's backlog when the newer arrives and is superseded (counted).
+#: Without them, how many reports were superseded measured only how loaded the machine was: a
+#: clean-clone CI run on a quiet machine counted 684 where the test asks for more than 1000.
+TWICE_IDS = RING_IDS[:40]
+TWICE_OLDER_S = 0.05
+
+
 class HostileSender:
-    """Sends one round of every hostile kind every 0.1 s (about 1000 reports per second)."""
+    """Sends one round of every hostile kind every 0.1 s (about 1440 reports per second)."""
 
     def __init__(self, port: int, seed: int = 3) -> None:
         self.port = port
         self.rng = np.random.default_rng(seed)
         self.sent = 0
+        self.pairs_sent = 0  #: reports of TWICE_IDS followed at once by a newer one of theirs
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.mav = {sysid: mavlink2.MAVLink(None, sysid, 197) for sysid in (*RING_IDS, 140, 141, 142, 143)}
@@ -69,8 +78,11 @@ class HostileSender:
         angles = np.linspace(0.0, 2 * np.pi, len(RING_IDS), endpoint=False)
         for sysid, a in zip(RING_IDS, angles):  # 100 ids on a 6 m ring round the route's middle, 0.2 m accurate
             x, y = 2.0 + 6.0 * np.cos(a), 6.0 * np.sin(a)
-            out.append(pack(sysid, odometry(t_us, 1, 1, x, y, -5.0, [1, 0, 0, 0], 0, 0, 0, 0, 0, 0,
-                                            _cov(0.04), _cov(0.01), 0, 0, 100)))
+            stamps = (max(0, t_us - int(TWICE_OLDER_S * 1e6)), t_us) if sysid in TWICE_IDS else (t_us,)
+            self.pairs_sent += len(stamps) - 1
+            for stamp in stamps:  # back to back: the older one is still waiting when the newer one comes
+                out.append(pack(sysid, odometry(stamp, 1, 1, x, y, -5.0, [1, 0, 0, 0], 0, 0, 0, 0, 0, 0,
+                                                _cov(0.04), _cov(0.01), 0, 0, 100)))
         return out
 
     def _run(self) -> None:
@@ -108,8 +120,9 @@ def test_that_hostile_obstacle_reports_neither_crash_fly_nor_slow_its_stream(tmp
     def refused(sysid: int, reason: str) -> int:
         return sum(n for k, n in rejected.items() if f" sys {sysid}: " in k and reason in k)
 
-    # (an overloaded stream handles only the newest waiting report of a source: the rest are superseded, counted)
-    assert report["inbound_superseded"] > 1000
+    # (the stream handles only the newest waiting report of a source: the rest are superseded, counted;
+    # TWICE_IDS send 400 a second that a newer one of theirs follows at once: at least half of those)
+    assert report["inbound_superseded"] > max(1000, hostile.pairs_sent // 2), (report["inbound_superseded"], hostile.pairs_sent)
     assert refused(140, "variances above") >= 5, rejected             # 1e30 m^2
     assert refused(141, "non-finite") >= 5 and refused(142, "non-finite") >= 5, rejected
     # a stamp stuck at 0xFFFFFFFF: its reports are duplicates or restart its clock (the track is reset), counted
