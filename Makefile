@@ -32,7 +32,7 @@ demo: $(STAMP)
 	$(VENV)/bin/companion demo antipodal
 
 test: $(STAMP)
-	$(VENV)/bin/pytest -q
+	$(VENV)/bin/pytest -q --durations=15
 
 bench: $(BSTAMP)
 	$(VPY) -m tests.benchmarks
