@@ -28,6 +28,8 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from tests.px4.sitl import sitl_dir
+
 REPO = Path(__file__).resolve().parents[2]
 
 #: The stages of ``.ci/run`` that fly in wall-clock time, as pytest arguments, and the quarantine.
@@ -116,10 +118,6 @@ def _run_stage(stage: str, xml: Path, timeout_s: float, env: dict) -> int:
         return -1
 
 
-def _sitl_present(env: dict) -> bool:
-    return (Path(env.get("PX4_SITL_DIR", REPO.parent / "shared" / "px4-sitl")) / "start-sih").exists()
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="flake_check", description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=20, help="rounds (default 20)")
@@ -131,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.runs < 1:
         parser.error("--runs must be at least 1")
     env = dict(os.environ)
-    stages = args.stage or ["realtime"] + (["px4"] if _sitl_present(env) else [])
+    stages = args.stage or ["realtime"] + (["px4"] if sitl_dir() is not None else [])
     args.out.mkdir(parents=True, exist_ok=True)
     rounds: list[list[dict]] = []
     for k in range(1, args.runs + 1):
