@@ -82,13 +82,7 @@ class ScenarioGoal:
         if goal is None:
             return np.asarray(position, dtype=float).copy()  # nothing placed: stay
         start = self.route_start if self.route_start is not None else position
-        route = goal - start
-        length = float(np.linalg.norm(route))
-        if length < 1e-9:
-            return goal.copy()
-        along = float(np.dot(position - start, route) / length)
-        s = min(length, max(0.0, along) + self.mission.waypoint_spacing_m)
-        return start + route * (s / length)
+        return route_target(start, goal, position, self.mission.waypoint_spacing_m)
 
     def reached(self, position: np.ndarray) -> bool:
         goal = self.goal
@@ -184,6 +178,18 @@ class PlacedGoal(ScenarioGoal):
         self.failed = reason
         logger.error("%s", reason)
         return Preparation(False, [(mavlink2.MAV_SEVERITY_WARNING, short)], failed=reason)
+
+
+def route_target(start: np.ndarray, goal: np.ndarray, position: np.ndarray, spacing_m: float) -> np.ndarray:
+    """The intermediate waypoint (NED m): ``spacing_m`` ahead of ``position``'s projection on the
+    straight route from ``start`` to ``goal``, held at the goal (and at the start behind it)."""
+    route = goal - start
+    length = float(np.linalg.norm(route))
+    if length < 1e-9:
+        return np.array(goal, dtype=float)
+    along = float(np.dot(position - start, route) / length)
+    s = min(length, max(0.0, along) + spacing_m)
+    return start + route * (s / length)
 
 
 def leads_the_way(goal: np.ndarray | None, position: np.ndarray, obstacle: np.ndarray) -> bool:

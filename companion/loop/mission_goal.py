@@ -34,7 +34,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.loop.config import GOAL_BELOW_ORIGIN_MAX_M, MissionConfig
-from companion.loop.goal import Preparation
+from companion.loop.goal import Preparation, route_target
 from companion.loop.goal_frames import GoalSpec, place
 from companion.loop.mission_file import MissionPlan, check_items
 from companion.loop.vehicle_reference import VehicleReference
@@ -116,13 +116,7 @@ class MissionGoal:
             self._reach(position)
         goal = self.waypoints[self.index].position
         start = self.route_start if self.route_start is not None else position
-        route = goal - start
-        length = float(np.linalg.norm(route))
-        if length < 1e-9:
-            return goal.copy()
-        along = float(np.dot(position - start, route) / length)
-        s = min(length, max(0.0, along) + self.mission.waypoint_spacing_m)
-        return start + route * (s / length)
+        return route_target(start, goal, position, self.mission.waypoint_spacing_m)
 
     def reached(self, position: np.ndarray) -> bool:
         if not self.waypoints or self.index < len(self.waypoints) - 1:
