@@ -127,6 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_seed, default=0, help="noise seed (default 0)")
     p.add_argument("--tlog", type=_output_file, help="record the API link to this tlog file")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON at the end")
+    p.add_argument("--truth-trace", type=_output_file, metavar="FILE",
+                   help="at the end, write the true positions of the drone and the obstacles, 10 Hz, "
+                        "as JSON lines (t_s, drone_ned_m, obstacles_ned_m)")
     p.add_argument("--api-port", type=_port, default=14540, help="offboard client port to send to (default 14540)")
     p.add_argument("--gcs-port", type=_port, default=14550, help="ground station port to send to (default 14550)")
     p.add_argument("--serial", metavar="DEVICE",
@@ -250,6 +253,9 @@ def main(argv: list[str] | None = None) -> int:
         if interrupted:
             print(f"mavsim: stopped by {interrupted[0]}", file=sys.stderr)
         summary = sim.summary()
+    if args.truth_trace:
+        with open(args.truth_trace, "w", encoding="utf-8") as trace:
+            trace.writelines(json.dumps(row) + "\n" for row in sim.trace_rows())
     if args.json:
         print(json.dumps(summary, indent=2))
     return 0

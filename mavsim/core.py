@@ -361,6 +361,10 @@ class Simulator:
         return Truth(t, v.position_ned_m.copy(), v.velocity_ned_mps.copy(), v.yaw_rad, v.on_ground,
                      self.commander.armed, self.commander.mode, pos, vel)
 
+    def trace_rows(self) -> list[dict]:
+        """The truth trace (see :meth:`mavsim.truth.TruthRecorder.trace_rows`)."""
+        return self.recorder.trace_rows()
+
     def summary(self) -> dict:
         """JSON-serialisable run summary: truth metrics, final state, link statistics."""
         v = self.vehicle

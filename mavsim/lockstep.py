@@ -115,6 +115,10 @@ class LockstepSimulator:
         """Run summary (see :meth:`mavsim.core.Simulator.summary`)."""
         return self._sim.summary()
 
+    def trace_rows(self) -> list[dict]:
+        """The truth trace (see :meth:`mavsim.truth.TruthRecorder.trace_rows`)."""
+        return self._sim.recorder.trace_rows()
+
     @property
     def goal_reached_t_s(self) -> float | None:
         """When the truth first reached the goal, simulation seconds, or None (the summary's

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,7 +18,12 @@ from mavsim.scenario import Scenario
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Truth", "TruthRecorder"]
+__all__ = ["Truth", "TruthRecorder", "TRACE_PERIOD_S", "TRACE_MAX_ROWS"]
+
+#: The truth trace's sample period, s (``mavsim --truth-trace``).
+TRACE_PERIOD_S = 0.1
+#: The truth trace keeps the last this many samples (an hour at 10 Hz): bounded for ``--forever``.
+TRACE_MAX_ROWS = 36_000
 
 
 @dataclass(frozen=True)
@@ -45,10 +51,16 @@ class _Contact:
 
 
 class TruthRecorder:
-    """Accumulates safety and mission metrics over a run."""
+    """Accumulates safety and mission metrics over a run, and a trace of the true positions.
+
+    The trace (:meth:`trace_rows`) samples the drone's and each obstacle's true position every
+    :data:`TRACE_PERIOD_S` of simulated time, the last :data:`TRACE_MAX_ROWS` kept.
+    """
 
     def __init__(self, scenario: Scenario) -> None:
         self.sc = scenario
+        self._trace: deque[tuple[float, np.ndarray, np.ndarray]] = deque(maxlen=TRACE_MAX_ROWS)
+        self._next_trace_s = 0.0
         r = scenario.vehicle_radius_m
         self.names = [o.name for o in scenario.obstacles]
         self.radius_sum = np.array([r + o.radius_m for o in scenario.obstacles])
@@ -73,6 +85,9 @@ class TruthRecorder:
     def update(self, t_s: float, p: np.ndarray, obstacle_pos: np.ndarray) -> None:
         """Record the true drone position ``p`` (3,) and obstacle positions (M, 3) at ``t_s``."""
         self.t_s = t_s
+        if t_s >= self._next_trace_s - 1e-9:
+            self._next_trace_s = t_s + TRACE_PERIOD_S
+            self._trace.append((t_s, np.array(p, dtype=float), np.array(obstacle_pos, dtype=float).reshape(-1, 3)))
         if self._last_p is not None:
             step = p - self._last_p
             self.path_length_m += math.sqrt(float(step @ step))
@@ -115,6 +130,13 @@ class TruthRecorder:
             c.min_distance_m = min(c.min_distance_m, float(dist[i]))
         for key in [k for k in self._open if k[0] == kind and not hit[names.index(k[1])]]:
             self._open.pop(key).t_end_s = t_s
+
+    def trace_rows(self) -> list[dict]:
+        """The truth trace, one JSON-serialisable dict a sample: ``t_s`` (s since boot),
+        ``drone_ned_m`` and ``obstacles_ned_m`` (name -> NED m), oldest first."""
+        return [{"t_s": round(t, 4), "drone_ned_m": [round(float(x), 4) for x in p],
+                 "obstacles_ned_m": {n: [round(float(x), 4) for x in q] for n, q in zip(self.names, obs)}}
+                for t, p, obs in self._trace]
 
     def summary(self) -> dict:
         """JSON-serialisable metrics (plain floats, None for 'never')."""

@@ -10,7 +10,7 @@ import subprocess
 import sys
 import textwrap
 
-from tests.support.flake_check import read_junit, render, tally
+from tests.support.flake_check import read_junit, render, stage_argv, tally
 from tests.support.flight_summary import flight_line
 
 SUMMARY = {
@@ -75,3 +75,9 @@ def test_that_a_failing_flight_test_prints_its_flight_and_the_table_counts_it(tm
 def test_that_a_skipped_run_is_not_counted():
     cases = [{"test": "t", "outcome": "skipped", "seconds": 0.0, "flight": None, "true_clearance_m": None, "message": ""}]
     assert tally([cases]) == {}
+
+
+def test_that_a_stage_run_narrowed_by_k_selects_within_the_stages_marker(tmp_path):
+    argv = stage_argv("quarantine", tmp_path / "r.xml", "clean_stop")
+    assert argv[-4:] == ["-m", "quarantine", "-k", "clean_stop"]
+    assert "-k" not in stage_argv("realtime", tmp_path / "r.xml")

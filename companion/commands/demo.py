@@ -33,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=seed, default=0, help="simulator noise seed (default 0)")
     p.add_argument("--formulation", default=None, choices=FORMULATIONS, help="planner formulation (hyperplane, paper, deterministic, bhattacharyya)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
-    p.add_argument("--out", default=None, metavar="DIR", help="keep the tlogs, the ground-truth summary and the figures here")
+    p.add_argument("--out", default=None, metavar="DIR", help="keep the tlogs, the ground-truth summary and the figures here (summary.json; --realtime: and mavsim's 10 Hz truth trace, truth_trace.jsonl)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--realtime", action="store_true", help="two processes over loopback UDP in real time")
     p.add_argument("--speed", type=positive_number, default=1.0, help="with --realtime: simulated seconds per wall second of mavsim (default 1)")
@@ -218,7 +218,7 @@ def _start_fly(scenario: Path, args: argparse.Namespace, overrides: dict, out: P
         "--exit-after-goal", "1.0", "--duration", f"{fly_duration_s:.1f}", "--json",
     ]
     if out is not None:
-        sim_cmd += ["--tlog", str(out / "mavsim.tlog")]
+        sim_cmd += ["--tlog", str(out / "mavsim.tlog"), "--truth-trace", str(out / "truth_trace.jsonl")]
         fly_cmd += ["--tlog", str(out / "companion.tlog")]
     if overrides.get("formulation"):
         fly_cmd += ["--formulation", overrides["formulation"]]
@@ -300,4 +300,5 @@ def _run_realtime(scenario: Path, args: argparse.Namespace, overrides: dict, out
         summary["crowd_reports_sent"] = crowd.stats.sent
     if out is not None:
         (out / "truth.json").write_text(json.dumps(truth, indent=2, default=str))
+        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
     return summary

@@ -9,6 +9,7 @@ cannot reach that is marked ``quarantine`` (out of CI, ``make quarantine-test``)
 
     python -m tests.support.flake_check --runs 20                 # CI's stages (make flake-check)
     python -m tests.support.flake_check --runs 20 --stage quarantine   # the tests kept out of CI
+    python -m tests.support.flake_check --runs 20 --stage quarantine -k clean_stop   # some of them
 
 Exit status: 0 when every test passed every run, 1 otherwise, 2 on bad arguments. Every stage run
 is bounded in time (``--stage-timeout``); its process group is ended when the time runs out.
@@ -106,8 +107,13 @@ def render(table: dict[str, TestRuns], rounds_asked: int) -> str:
     return "\n".join(lines)
 
 
-def _run_stage(stage: str, xml: Path, timeout_s: float, env: dict) -> int:
-    argv = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", f"--junitxml={xml}", *STAGES[stage]]
+def stage_argv(stage: str, xml: Path, keyword: str | None = None) -> list[str]:
+    """The pytest command of one stage run, its JUnit report to ``xml``, narrowed by ``-k keyword``."""
+    narrow = ["-k", keyword] if keyword else []
+    return [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", f"--junitxml={xml}", *STAGES[stage], *narrow]
+
+
+def _run_stage(argv: list[str], timeout_s: float, env: dict) -> int:
     proc = subprocess.Popen(argv, cwd=REPO, env=env, start_new_session=True,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
@@ -124,6 +130,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--stage", action="append", choices=sorted(STAGES),
                         help="a stage to run (repeatable; default: realtime, and px4 when a PX4 SITL build is present)")
     parser.add_argument("--stage-timeout", type=float, default=1800.0, help="seconds one stage run may take (default 1800)")
+    parser.add_argument("-k", dest="keyword", metavar="EXPR",
+                        help="only the stage's tests pytest's -k EXPR selects (to prove some tests of a stage)")
     parser.add_argument("--out", type=Path, default=REPO / "out" / "flake-check", help="where the reports go")
     args = parser.parse_args(argv)
     if args.runs < 1:
@@ -138,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
             xml = args.out / f"round{k:02d}-{stage}.xml"
             xml.unlink(missing_ok=True)
             t0 = time.monotonic()
-            rc = _run_stage(stage, xml, args.stage_timeout, env)
+            rc = _run_stage(stage_argv(stage, xml, args.keyword), args.stage_timeout, env)
             got = read_junit(xml.read_text()) if xml.exists() else []
             if rc == -1 or not got:
                 got.append({"test": f"<stage {stage}>", "outcome": "failed", "seconds": time.monotonic() - t0,
