@@ -17,7 +17,7 @@ import pytest
 
 from tests.support.recipes import readme_recipes, run_recipe
 
-pytestmark = [pytest.mark.realtime, pytest.mark.quarantine(reason="new in the loop redesign; not yet 20 of 20 in make flake-check")]
+pytestmark = [pytest.mark.realtime]
 
 
 def test_that_the_readme_fly_recipe_against_mavsim_works_as_written(tmp_path):

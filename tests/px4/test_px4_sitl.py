@@ -43,7 +43,6 @@ def test_that_the_companion_flies_px4_sitl_through_the_antipodal_encounter_safel
     assert judge_safety(result) + judge_replay(result) + judge_encounter(result) == [], json.dumps(result, default=str)
 
 
-@pytest.mark.quarantine(reason="new in the loop redesign; not yet 20 of 20 in make flake-check")
 @pytest.mark.parametrize("signum", [signal.SIGINT], ids=["SIGINT"])
 def test_that_ctrl_c_mid_encounter_hands_px4_back_to_hold_without_a_failsafe_and_replays_exactly(tmp_path, signum):
     """Ctrl-C 6 s into OFFBOARD (the obstacles closing in): Hold, no "Failsafe" from PX4, exit 3, a summary,

@@ -23,7 +23,7 @@ import pytest
 from tests.px4.sitl import sitl_dir
 from tests.support.recipes import readme_recipes, run_recipe
 
-pytestmark = [pytest.mark.px4, pytest.mark.quarantine(reason="new in the loop redesign; not yet 20 of 20 in make flake-check")]
+pytestmark = [pytest.mark.px4]
 
 _PRELUDE = """\
 PX4_PID=$("{start}" "$PWD/sih")
