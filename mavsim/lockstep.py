@@ -117,7 +117,7 @@ class LockstepSimulator:
 
     def trace_rows(self) -> list[dict]:
         """The truth trace (see :meth:`mavsim.truth.TruthRecorder.trace_rows`)."""
-        return self._sim.recorder.trace_rows()
+        return self._sim.trace_rows()
 
     @property
     def goal_reached_t_s(self) -> float | None:
