@@ -29,7 +29,7 @@ from tests.loop.test_fence_flight import EXCLUSION, INCLUSION, LOCAL, _latlon
 from tests.px4.sitl import REPO, Sitl, raise_priority, sitl_dir
 from tests.support.missions import plan_dict
 
-pytestmark = [pytest.mark.px4, pytest.mark.quarantine(reason="new in the loop redesign; not yet 20 of 20 in make flake-check")]
+pytestmark = [pytest.mark.px4]
 
 GCS_URL = "udpin:127.0.0.1:14550"       # PX4's ground-station link (it sends from 18570)
 

@@ -23,7 +23,7 @@ from tests.px4.sitl import REPO, sitl_dir
 from tests.px4.test_readme_recipe import _PRELUDE
 from tests.support.recipes import run_recipe
 
-pytestmark = [pytest.mark.px4, pytest.mark.quarantine(reason="new in the loop redesign; not yet 20 of 20 in make flake-check")]
+pytestmark = [pytest.mark.px4]
 
 _FLIGHT = """\
 mavsim traffic --scenario antipodal_px4_adsb.toml --duration 180 --json > traffic.json &

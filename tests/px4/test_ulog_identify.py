@@ -15,7 +15,7 @@ import pytest
 from tests.offline.test_ulog import assert_same_model_as_tlog
 from tests.px4.sitl import REPO, Sitl, raise_priority, sitl_dir
 
-pytestmark = [pytest.mark.px4, pytest.mark.quarantine(reason="new in the loop redesign; not yet 20 of 20 in make flake-check")]
+pytestmark = [pytest.mark.px4]
 
 
 def test_identify_on_px4s_ulog_gives_the_model_of_the_same_flights_tlog(tmp_path):

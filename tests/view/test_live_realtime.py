@@ -16,7 +16,7 @@ pytest.importorskip("websockets")
 from tests.px4.sitl import REPO  # noqa: E402
 from tests.view.test_live import Client  # noqa: E402
 
-pytestmark = [pytest.mark.realtime, pytest.mark.quarantine(reason="new in the loop redesign; not yet 20 of 20 in make flake-check")]
+pytestmark = [pytest.mark.realtime]
 
 
 def _free_tcp_port() -> int:
