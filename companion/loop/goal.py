@@ -23,6 +23,7 @@ text)])`` (what it sends and says at each tick once ready: a mission's progress)
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -192,13 +193,19 @@ def route_target(start: np.ndarray, goal: np.ndarray, position: np.ndarray, spac
     return start + route * (s / length)
 
 
-def leads_the_way(goal: np.ndarray | None, position: np.ndarray, obstacle: np.ndarray) -> bool:
-    """Whether an obstacle at ``obstacle`` is between the drone at ``position`` and ``goal`` along the line to it.
+def leads_the_way(goal: np.ndarray | None, position: np.ndarray, obstacle: np.ndarray,
+                  block_m: float = math.inf) -> bool:
+    """Whether an obstacle at ``obstacle`` leads the way: between the drone at ``position`` and
+    ``goal`` along the line to it, and within ``block_m`` (m) of that line (it blocks the way).
 
     The ``c_max`` upper bound (keep the ``c_max`` contours touching) is meant for following
     an obstacle that leads the way through a tight space; it is released once that
-    obstacle is behind the drone or past the goal, so the drone stops at its goal instead
-    of being dragged along. No goal: no obstacle leads.
+    obstacle is behind the drone, past the goal or off the way, so the drone stops at its
+    goal instead of being dragged along. ``block_m`` is how near the line a body must be to
+    stand in the way (the loop: both radii and both ``c_min`` reaches); without it an obstacle
+    beside the line "led" whenever its projection fell between, e.g. the leader just past the
+    goal while the drone's last few centimetres to the goal were vertical (issue 46).
+    No goal: no obstacle leads.
     """
     if goal is None:
         return False
@@ -206,5 +213,8 @@ def leads_the_way(goal: np.ndarray | None, position: np.ndarray, obstacle: np.nd
     length = float(np.linalg.norm(to_goal))
     if length < 1e-9:
         return False
-    along = float(np.dot(obstacle - position, to_goal) / length)
-    return 0.0 < along < length
+    offset = obstacle - position
+    along = float(np.dot(offset, to_goal) / length)
+    if not 0.0 < along < length:
+        return False
+    return float(np.linalg.norm(offset - to_goal * (along / length))) < block_m

@@ -29,6 +29,11 @@ from estimator.models import propagate_position
 logger = logging.getLogger(__name__)
 
 
+def _spread(cov: np.ndarray) -> float:
+    """The standard deviation along a covariance's longest axis (m)."""
+    return float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
+
+
 @dataclass(frozen=True, eq=False)
 class ReplanJob:
     """One replan asked of the planner, with the context the loop records beside its answer.
@@ -197,13 +202,19 @@ class RequestBuilder:
         for key, (m0, c0) in now_left_out.items():
             now_pos[key], now_cov[key] = m0, c0
         goal = self.goal.goal
-        leading = [leads_the_way(goal, position, now_pos[k]) for k in constrained]
+        # an obstacle leads the way (and is followed under c_max) only if it stands in it: within both
+        # bodies and both c_min reaches of the line to the goal
+        drone_reach = self.cfg.drone_radius_m + self._sigmas * _spread(cov_now)
+        leading = [leads_the_way(goal, position, now_pos[k],
+                                 drone_reach + self.obstacle_radius(k) + self._sigmas * _spread(now_cov[k]))
+                   for k in constrained]
         for source in self.sources:  # the obstacles that are not tracks, after the tracks
             h = source.horizon(times)
             means.extend(h.means)
             covs.extend(h.covs)
             radii.extend(h.radii.tolist())
-            leading.extend(bool(lead) and leads_the_way(goal, position, m[0]) for lead, m in zip(h.may_lead, h.means))
+            leading.extend(bool(lead) and leads_the_way(goal, position, m[0], drone_reach + r + self._sigmas * _spread(c[0]))
+                           for lead, m, c, r in zip(h.may_lead, h.means, h.covs, h.radii))
         target = self.goal.target(position)
         walls_normal, walls_offset = self.scenario.walls_normal, self.scenario.walls_offset
         if self.fence is not None:

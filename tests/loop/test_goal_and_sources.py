@@ -27,6 +27,17 @@ def test_that_only_an_obstacle_between_the_drone_and_the_goal_leads_the_way():
     assert not leads_the_way(goal, here, np.array([-1.0, 0.0, 0.0]))   # behind
     assert not leads_the_way(goal, here, np.array([11.0, 0.0, 0.0]))   # past the goal
     assert not leads_the_way(None, here, np.array([5.0, 0.0, 0.0]))    # no goal
+    # only an obstacle in the way leads: within block_m of the line to the goal
+    assert leads_the_way(goal, here, np.array([5.0, 1.0, 0.0]), block_m=1.3)
+    assert not leads_the_way(goal, here, np.array([5.0, 1.5, 0.0]), block_m=1.3)   # beside the way
+
+
+def test_that_a_leader_just_past_the_goal_does_not_lead_when_the_last_bit_to_the_goal_is_vertical():
+    # issue 46: the corridor's drone 0.37 m under its goal, the leader 1.7 m on; its projection on
+    # the (vertical) line to the goal fell between, and the drone was told to follow it downwards
+    here, goal, leader = np.array([23.99, -0.02, -4.63]), np.array([24.0, 0.0, -5.0]), np.array([25.66, 0.0, -4.88])
+    assert leads_the_way(goal, here, leader)                      # the projection alone
+    assert not leads_the_way(goal, here, leader, block_m=1.3)     # it is not in the way
 
 
 class _Shared:
@@ -59,6 +70,31 @@ def test_that_the_request_takes_its_target_from_the_goal_source_and_each_sources
     default = RequestBuilder(scenario).build(seq=0, t_s=0.0, t_v=0.0, perception=perception,
                                              initial_velocity=np.zeros(3), warm_start=None)
     assert default.request.num_obstacles == 1 + len(scenario.static_obstacles)
+
+
+class _SharedAt(_Shared):
+    """The same shared plan, standing still at ``where``."""
+
+    def __init__(self, where):
+        self.where = np.asarray(where, dtype=float)
+
+    def horizon(self, times_s):
+        h = super().horizon(times_s)
+        return ObstacleHorizon(np.broadcast_to(self.where, h.means.shape).copy(), h.covs, h.radii, h.may_lead)
+
+
+def test_that_only_an_obstacle_in_the_way_is_marked_to_be_followed():
+    # issue 46: an obstacle whose projection falls between the drone and its goal but which stands
+    # off the way (farther than both bodies and both c_min reaches) is not followed under c_max
+    scenario = load_scenario(SCENARIO)
+    perception = Perception(scenario)
+    perception.drone.update(0.0, np.array([0.0, 0.0, -5.0]), np.zeros(3), np.full(3, 0.01), np.full(3, 0.01))
+    goal = ScenarioGoal(MissionConfig(goal_ned_m=np.array([0.0, 12.0, -5.0]), goal_tolerance_m=0.3, waypoint_spacing_m=4.0))
+    goal.start(np.array([0.0, 0.0, -5.0]))
+    sources = (_SharedAt([0.8, 6.0, -5.0]), _SharedAt([3.0, 6.0, -5.0]), _SharedAt([0.0, 6.0, -7.5]))
+    job = RequestBuilder(scenario, goal=goal, sources=sources).build(
+        seq=0, t_s=0.0, t_v=0.0, perception=perception, initial_velocity=np.zeros(3), warm_start=None)
+    assert job.request.upper_bound_mask.tolist() == [True, False, False]   # in the way; 3 m beside it; 2.5 m above it
 
 
 class _Goal(ScenarioGoal):
