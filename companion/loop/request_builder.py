@@ -23,15 +23,10 @@ from companion.loop.config import CompanionScenario
 from companion.loop.goal import GoalSource, ScenarioGoal, leads_the_way
 from companion.loop.obstacle_sources import ObstacleSource, StaticObstacles
 from companion.loop.perception import Perception
-from companion.loop.track_selection import beyond_walls, choose, confidence_radius, rank_by_risk
+from companion.loop.track_selection import beyond_walls, choose, confidence_radius, rank_by_risk, reach_m
 from estimator.models import propagate_position
 
 logger = logging.getLogger(__name__)
-
-
-def _spread(cov: np.ndarray) -> float:
-    """The standard deviation along a covariance's longest axis (m)."""
-    return float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -204,16 +199,16 @@ class RequestBuilder:
         goal = self.goal.goal
         # an obstacle leads the way (and is followed under c_max) only if it stands in it: within both
         # bodies and both c_min reaches of the line to the goal
-        drone_reach = self.cfg.drone_radius_m + self._sigmas * _spread(cov_now)
+        drone_reach = reach_m(self.cfg.drone_radius_m, cov_now, self._sigmas)
         leading = [leads_the_way(goal, position, now_pos[k],
-                                 drone_reach + self.obstacle_radius(k) + self._sigmas * _spread(now_cov[k]))
+                                 drone_reach + reach_m(self.obstacle_radius(k), now_cov[k], self._sigmas))
                    for k in constrained]
         for source in self.sources:  # the obstacles that are not tracks, after the tracks
             h = source.horizon(times)
             means.extend(h.means)
             covs.extend(h.covs)
             radii.extend(h.radii.tolist())
-            leading.extend(bool(lead) and leads_the_way(goal, position, m[0], drone_reach + r + self._sigmas * _spread(c[0]))
+            leading.extend(bool(lead) and leads_the_way(goal, position, m[0], drone_reach + reach_m(r, c[0], self._sigmas))
                            for lead, m, c, r in zip(h.may_lead, h.means, h.covs, h.radii))
         target = self.goal.target(position)
         walls_normal, walls_offset = self.scenario.walls_normal, self.scenario.walls_offset

@@ -53,6 +53,13 @@ def confidence_radius(c_min: float) -> float:
     return float(math.sqrt(chi2.ppf(c_min, 3)))
 
 
+def reach_m(radius_m: float, cov: np.ndarray, sigmas: float) -> float:
+    """How far (m) a body of ``radius_m`` and its ``c_min`` ellipsoid reach from its mean, at most:
+    the radius plus ``sigmas`` (:func:`confidence_radius`) standard deviations of the position
+    covariance ``cov`` (3, 3, m^2) along its longest axis."""
+    return radius_m + sigmas * float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
+
+
 def rank_by_risk(
     drone_path: np.ndarray,
     track_means: np.ndarray,
