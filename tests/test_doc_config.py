@@ -26,6 +26,7 @@ from companion.core.planner.vehicle_model import AxisResponse
 from companion.errors import ConfigError
 from companion.loop.intake import traffic_config
 from companion.loop.config import LoopConfig, MissionConfig, scenario_from_dict
+from companion.loop.fleet_config import FleetConfig
 from companion.mavlink.offboard import OffboardConfig
 from companion.validation import field_names
 from estimator import DroneFilterConfig, TrackerConfig
@@ -71,6 +72,7 @@ def accepted_keys() -> dict[str, frozenset[str]]:
         "offboard": field_names(OffboardConfig),
         "traffic": frozenset(traffic_config._KEYS),
         "traffic.source": frozenset(traffic_config._SOURCE_KEYS),
+        "fleet": field_names(FleetConfig),
         "map": _allowed_by_loader("map") | {"walls", "static_obstacles"},
         "map.walls": _allowed_by_loader("map.walls"),
         "map.static_obstacles": _allowed_by_loader("map.static_obstacles"),

@@ -29,6 +29,7 @@ from companion.core.planner.config import PlannerConfig
 from companion.loop.goal_frames import GoalSpec
 from companion.loop.mission_file import read_mission_file
 from companion.loop.intake.traffic_config import TrafficConfig, traffic_from_toml
+from companion.loop.fleet_config import FleetConfig
 from estimator import DroneFilterConfig, EstimatorConfigError, TrackerConfig
 
 logger = logging.getLogger(__name__)
@@ -45,7 +46,8 @@ GOAL_BELOW_ORIGIN_MAX_M = 0.5
 MAX_WALLS = 64
 MAX_STATIC_OBSTACLES = 256
 
-_COMPANION_SECTIONS = {"scenario", "vehicle", "mission", "planner", "estimator", "map", "companion", "offboard", "traffic"}
+_COMPANION_SECTIONS = {"scenario", "vehicle", "mission", "planner", "estimator", "map", "companion", "offboard", "traffic",
+                       "fleet"}
 
 #: Keys of the sections mavsim owns, by section (``world.obstacles`` is each ``[[world.obstacles]]``).
 #: mavsim validates their values; tests/loop/test_config.py holds this equal to mavsim's schema.
@@ -284,6 +286,7 @@ class CompanionScenario:
     walls: tuple[Wall, ...] = field(default_factory=tuple)
     static_obstacles: tuple[StaticObstacle, ...] = field(default_factory=tuple)
     traffic: TrafficConfig = field(default_factory=TrafficConfig)
+    fleet: FleetConfig = field(default_factory=FleetConfig)
 
     @property
     def walls_normal(self) -> np.ndarray:
@@ -430,4 +433,5 @@ def scenario_from_dict(data: Mapping[str, Any], path: str | Path = "<dict>", **p
         mission=mission, planner=planner, drone_filter=drone_filter, tracker=tracker, companion=loop,
         offboard=offboard, walls=walls, static_obstacles=statics,
         traffic=traffic_from_toml(_section(data, "traffic", where), f"{path} [traffic]"),
+        fleet=check.build_section(FleetConfig, _section(data, "fleet", where), f"{path} [fleet]"),
     )

@@ -22,6 +22,7 @@ from companion.core.planner import Plan, PlanRequest
 from companion.loop.config import CompanionScenario
 from companion.loop.goal import GoalSource, ScenarioGoal, leads_the_way
 from companion.loop.obstacle_sources import ObstacleSource, StaticObstacles
+from companion.loop.peer_intents import PeerIntents
 from companion.loop.perception import Perception
 from companion.loop.track_selection import beyond_walls, choose, confidence_radius, rank_by_risk, reach_m
 from estimator.models import propagate_position
@@ -62,6 +63,11 @@ class ReplanJob:
     tracks_beyond_walls : tuple
         Tracks beyond a wall for the whole horizon: no rows needed (see
         :func:`~companion.loop.track_selection.beyond_walls`); neither constrained nor left out.
+    tracks_giving_way : tuple
+        Peers left out because they give way to this drone (``[fleet] coordination =
+        "prioritised"``, :meth:`~companion.loop.peer_intents.PeerIntents.gives_way`).
+    tracks_along_intent : tuple
+        Constrained tracks predicted along their peer's announced plan instead of at constant velocity.
     """
 
     seq: int
@@ -80,6 +86,8 @@ class ReplanJob:
     tracks_unconstrained: tuple = ()
     tracks_constrained: tuple = ()
     tracks_beyond_walls: tuple = ()
+    tracks_giving_way: tuple = ()
+    tracks_along_intent: tuple = ()
 
 
 #: How far (m, beyond the drone's radius) the way round a fence's zones keeps off their corners.
@@ -105,12 +113,15 @@ class RequestBuilder:
         Obstacles besides the tracks (default: the scenario's static obstacles).
     fence : FenceSource, optional
         A geofence: its walls about the plan's start join the scenario's walls.
+    peers : PeerIntents, optional
+        The fleet's intents: peers predicted along their announced plans, or left out when
+        they give way (:mod:`companion.loop.peer_intents`); None: every track at constant velocity.
     """
 
     def __init__(self, scenario: CompanionScenario,
                  obstacle_radius: Callable[[Hashable], float] | None = None, *,
                  goal: GoalSource | None = None, sources: Sequence[ObstacleSource] | None = None,
-                 fence=None) -> None:
+                 fence=None, peers: PeerIntents | None = None) -> None:
         self.scenario = scenario
         self.cfg = scenario.planner
         self.settings = scenario.companion
@@ -124,6 +135,8 @@ class RequestBuilder:
         self._sigmas = confidence_radius(self.cfg.c_min)
         #: the geofence (:class:`~companion.loop.fence_source.FenceSource`): walls about each plan's start
         self.fence = fence
+        #: the fleet's intents (None: no fleet)
+        self.peers = peers
 
     # ------------------------------------------------------------------ estimates
 
@@ -181,6 +194,11 @@ class RequestBuilder:
         tracker.prune(t_v)
         times = t0 + tau * np.arange(1, n + 1)
         keys = list(tracker.keys())
+        giving_way: list = []
+        if self.peers is not None:
+            giving_way = [k for k in keys if self.peers.gives_way(k, t_v)]
+            if giving_way:
+                keys = [k for k in keys if k not in set(giving_way)]
         # every track's estimate read once, as arrays (row k for keys[k]), when they are set apart or ranked
         stack = tracker.stacked(keys) if len(keys) > self.settings.max_constrained_tracks or self.scenario.walls else None
         row = {k: i for i, k in enumerate(keys)} if stack is not None else {}
@@ -196,6 +214,17 @@ class RequestBuilder:
         now_cov = dict(zip(constrained, predicted_covs[:, 0]))
         for key, (m0, c0) in now_left_out.items():
             now_pos[key], now_cov[key] = m0, c0
+        along_intent = []
+        if self.peers is not None:
+            for i, key in enumerate(constrained):
+                along = self.peers.predict(key, times, predicted_covs[i, 0], t_v)
+                if along is not None:
+                    means[i], covs[i] = along
+                    along_intent.append(key)
+            if giving_way:
+                gm, gc = tracker.predict_many(giving_way, np.array([t_v]))
+                for key, m0, c0 in zip(giving_way, gm[:, 0], gc[:, 0]):
+                    now_pos[key], now_cov[key] = m0, c0
         goal = self.goal.goal
         # an obstacle leads the way (and is followed under c_max) only if it stands in it: within both
         # bodies and both c_min reaches of the line to the goal
@@ -245,10 +274,12 @@ class RequestBuilder:
             target=target,
             obstacle_positions=now_pos,
             obstacle_covs=now_cov,
-            realised_contour=self._realised_contour(position_now, cov_now, keys, now_pos, now_cov),
+            realised_contour=self._realised_contour(position_now, cov_now, keys + giving_way, now_pos, now_cov),
             tracks_unconstrained=tuple(left_out),
             tracks_constrained=tuple(constrained),
             tracks_beyond_walls=tuple(beyond),
+            tracks_giving_way=tuple(giving_way),
+            tracks_along_intent=tuple(along_intent),
         )
 
     # ------------------------------------------------------------------ many tracks
