@@ -67,8 +67,9 @@ class Autopilot:
 
     def __init__(self, commander: Commander, params: ParamStore, telemetry: TelemetryBuilder,
                  links: tuple[str, ...], rates_hz: dict[str, float], home_alt_m: float,
-                 default_rates_hz: dict[str, float]) -> None:
+                 default_rates_hz: dict[str, float], system_id: int = SYSID) -> None:
         self.cmdr, self.params, self.tm = commander, params, telemetry
+        self.system_id = int(system_id)
         self.home_alt_m = home_alt_m
         rates = {**default_rates_hz, **rates_hz}
         self._default_us = {STREAM_IDS[n]: (round(1e6 / r) if r > 0 else None) for n, r in rates.items()}
@@ -114,7 +115,7 @@ class Autopilot:
             return []
         ts = getattr(msg, "target_system", 0)
         tc = getattr(msg, "target_component", 0)
-        if ts not in (0, SYSID) or (mtype != "SET_MODE" and tc not in (0, COMPID)):
+        if ts not in (0, self.system_id) or (mtype != "SET_MODE" and tc not in (0, COMPID)):
             self.stats["other_target"] += 1
             logger.debug("ignored %s for system %d component %d", mtype, ts, tc)
             return []

@@ -82,17 +82,23 @@ class Simulator:
     personality : str
         The autopilot imitated, a name in :data:`mavsim.personalities.PERSONALITIES`. The
         scenario's ``start_mode`` and ``params`` must be its own (SimulationError otherwise).
+    system_id : int
+        The vehicle's MAVLink system id (1 to 100; default 1): one vehicle of a fleet each
+        has its own, as PX4's multi-instance SITL gives instance N the id N + 1.
     """
 
     def __init__(self, scenario: Scenario | str | Path, seed: int = 0, links: tuple[str, ...] = ("api",),
                  signing: tuple[bytes, float] | None = None, obstacles_start: str = "boot",
-                 personality: str = DEFAULT_PERSONALITY) -> None:
+                 personality: str = DEFAULT_PERSONALITY, system_id: int = SYSID) -> None:
         if obstacles_start not in OBSTACLES_START:
             raise SimulationError(f"obstacles_start must be one of {', '.join(OBSTACLES_START)}, got {obstacles_start!r}")
         if not isinstance(scenario, Scenario):
             scenario = load_scenario(scenario)
         if not links:
             raise SimulationError("at least one link is needed")
+        if not 1 <= int(system_id) <= 100:
+            raise SimulationError(f"system_id must be 1 to 100 (obstacles use 101 up), got {system_id}")
+        self.system_id = int(system_id)
         self.personality = get_personality(personality)
         self.scenario = scenario
         self.seed = int(seed)
@@ -131,7 +137,7 @@ class Simulator:
         tm = TelemetryBuilder(cfg.position_noise_cov_m2, cfg.velocity_noise_cov_m2ps2,
                               cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m, cfg.geoid_separation_m, ap)
         self.autopilot = Autopilot(self.commander, self.params, tm, self.vehicle_links, cfg.stream_rates_hz,
-                                   cfg.home_alt_m, ap.stream_rates_hz)
+                                   cfg.home_alt_m, ap.stream_rates_hz, system_id=self.system_id)
         origin = (cfg.home_lat_deg, cfg.home_lon_deg, cfg.home_alt_m)
         self.obstacles = [
             ObstacleSystem(ob, scenario.obstacle_sysid_base + i, scenario.obstacle_compid,
@@ -155,7 +161,7 @@ class Simulator:
 
     # ------------------------------------------------------------------ helpers
     def _new_parser(self) -> mavlink2.MAVLink:
-        p = mavlink2.MAVLink(file=None, srcSystem=SYSID, srcComponent=COMPID)
+        p = mavlink2.MAVLink(file=None, srcSystem=self.system_id, srcComponent=COMPID)
         p.robust_parsing = True  # bad CRC / prefix -> BAD_DATA instead of an exception
         if self._signing is not None:
             enable_signing(p, self._signing[0], link_id=0, now_s=self._signing[1])
@@ -244,7 +250,7 @@ class Simulator:
             for severity, text in texts:
                 msg = statustext(severity, text)
                 for link in self.vehicle_links:
-                    self._send(link, SYSID, COMPID, msg)
+                    self._send(link, self.system_id, COMPID, msg)
             texts.clear()
 
     def _emit_due(self) -> None:
@@ -255,17 +261,17 @@ class Simulator:
             for msg_id in self.commander.announce:
                 msg = self.autopilot.tm.build(msg_id, self.now_us, self.commander, self.vehicle, pos, vel)
                 for link in self.vehicle_links:
-                    self._send(link, SYSID, COMPID, msg)
+                    self._send(link, self.system_id, COMPID, msg)
             self.commander.announce.clear()
         for link, msg in self.autopilot.streams_due(self.now_us, self.vehicle, self._estimate):
-            self._send(link, SYSID, COMPID, msg)
+            self._send(link, self.system_id, COMPID, msg)
         api = self.links[0]
         motion_s = None if self.motion_epoch_us == 0 else self._motion_s(self.now_us)
         for ob in self.obstacles:
             for route, msg in ob.due(self.now_us, motion_s):
                 if route == AUTOPILOT_ALL_LINKS:
                     for link in self.vehicle_links:
-                        self._send(link, SYSID, COMPID, msg)
+                        self._send(link, self.system_id, COMPID, msg)
                 else:
                     self._send(api if route == OWN_API_LINK else OBSTACLE_LINK, ob.sysid, ob.compid, msg)
 
@@ -314,7 +320,7 @@ class Simulator:
                 self.stats["handler_errors"] += 1
                 continue
             for out_link, reply in replies:
-                self._send(out_link, SYSID, COMPID, reply)
+                self._send(out_link, self.system_id, COMPID, reply)
         self._check_engaged()
         self._flush_texts()
 

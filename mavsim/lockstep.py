@@ -49,15 +49,17 @@ class LockstepSimulator:
         :data:`mavsim.tlog.LOCKSTEP_EPOCH_US` plus simulated time).
     personality : str
         The autopilot imitated (:data:`mavsim.personalities.PERSONALITIES`).
+    system_id : int
+        The vehicle's MAVLink system id (default 1; a fleet gives each vehicle its own).
     """
 
     def __init__(self, scenario: Scenario | dict[str, Any] | str | Path, seed: int = 0,
-                 tlog: str | Path | None = None, personality: str = DEFAULT_PERSONALITY) -> None:
+                 tlog: str | Path | None = None, personality: str = DEFAULT_PERSONALITY, system_id: int = 1) -> None:
         if isinstance(scenario, dict):
             scenario = scenario_from_dict(scenario)
         elif not isinstance(scenario, Scenario):
             scenario = load_scenario(scenario)
-        self._sim = Simulator(scenario, seed=seed, links=("api",), personality=personality)
+        self._sim = Simulator(scenario, seed=seed, links=("api",), personality=personality, system_id=system_id)
         self._tlog = TlogWriter(tlog) if tlog is not None else None
         self._obstacle_packets: list[tuple[float, bytes]] = []
         if self._tlog is not None:

@@ -50,7 +50,9 @@ from companion.loop.mission_goal import MissionGoal
 from companion.loop.perception import Perception
 from companion.loop.plan_cycle import PlanArrival, PlanCycle
 from companion.loop.planning import InlinePlanning, PlanningService
-from companion.loop.records import CompanionState, ReplanRecord
+from companion.loop.fleet_announcer import FleetAnnouncer
+from companion.loop.peer_intents import PeerIntents
+from companion.loop.records import CompanionState, LoopMode, ReplanRecord
 from companion.loop.request_builder import RequestBuilder
 from companion.loop.supervisor import Supervisor
 from companion.loop.vehicle_reference import VehicleReference
@@ -90,12 +92,18 @@ class Companion:
         The vehicle's origin and home, shared by the obstacle intake and the goal (default: a new one).
     fence : FenceSource, optional
         The geofence (default: the scenario's ``fence_file`` or its ``plan_file``'s fence, if any).
+    fleet : bool
+        Whether this companion flies in a fleet (``companion fly --fleet``): peers' intents
+        heard on obstacle links are used as ``[fleet]`` says (:mod:`companion.loop.peer_intents`),
+        and each tick fills :attr:`fleet_outbox` with this drone's announcements
+        (:mod:`companion.loop.fleet_announcer`) for the edge to send on the fleet link.
     """
 
     def __init__(self, scenario: CompanionScenario, offboard: OffboardConfig | None = None, *,
                  sequencer: OffboardSequence | None = None, planning: PlanningService | None = None,
                  goal: GoalSource | None = None, obstacle_sources: Sequence[ObstacleSource] | None = None,
-                 reference: VehicleReference | None = None, fence: FenceSource | None = None) -> None:
+                 reference: VehicleReference | None = None, fence: FenceSource | None = None,
+                 fleet: bool = False) -> None:
         self.scenario = scenario
         self.planner_config = scenario.planner
         self.settings = scenario.companion
@@ -104,9 +112,14 @@ class Companion:
         self.perception = Perception(scenario)
         #: the vehicle's origin and home: where geodetic traffic and goals are placed
         self.reference = reference if reference is not None else VehicleReference()
+        #: the fleet's intents, and what this drone announces (None: no fleet)
+        self.peers = PeerIntents(scenario.fleet, own_system=None) if fleet else None
+        self.announcer = FleetAnnouncer(scenario.fleet, scenario.planner.step_s) if fleet else None
+        #: this tick's messages for the fleet link (empty without a fleet)
+        self.fleet_outbox: Outbox = []
         # obstacle links, traffic reports and GPS_GLOBAL_ORIGIN, onto the same tracks and time base
         self.obstacles = ObstacleIntake(scenario.traffic, self.perception.tracker, self.perception.vehicle_time,
-                                        self.settings.obstacle_radius_m, reference=self.reference)
+                                        self.settings.obstacle_radius_m, reference=self.reference, peers=self.peers)
         plan = read_mission_file(scenario.mission.plan_file) if scenario.mission.plan_file is not None else None
         if goal is None and plan is not None:  # a mission file named by the scenario
             goal = MissionGoal(scenario.mission, self.reference, plan, upload=scenario.mission.plan_upload)
@@ -115,7 +128,7 @@ class Companion:
         #: the geofence the plans keep to (default: the scenario's, :func:`~companion.loop.fence_source.scenario_fence`)
         self.fence = fence if fence is not None else scenario_fence(scenario.mission, self.reference, plan)
         self.builder = RequestBuilder(scenario, obstacle_radius=self.obstacles.radius, goal=goal,
-                                      sources=obstacle_sources, fence=self.fence)
+                                      sources=obstacle_sources, fence=self.fence, peers=self.peers)
         self.executor = Executor(scenario.planner, 1.0 / self.settings.setpoint_rate_hz, self.planner.lag,
                                  max_plan_age_s=self.settings.max_plan_age_s)
         self.state = CompanionState()
@@ -198,7 +211,23 @@ class Companion:
         self.supervisor.signatures_rejected(total)
 
     def tick(self, t_s: float) -> Outbox:
-        """Advance the loop to link time ``t_s`` and return the messages to send now."""
+        """Advance the loop to link time ``t_s`` and return the messages to send now (to the
+        autopilot; the fleet's are in :attr:`fleet_outbox`)."""
+        out = self._tick(t_s)
+        if self.announcer is not None:
+            self.fleet_outbox = self._announce(t_s)
+        return out
+
+    def _announce(self, t_s: float) -> Outbox:
+        """This tick's fleet messages: the estimate, and the plan in force while one is tracked."""
+        if self.peers.own_system is None and self.autopilot is not None:
+            self.peers.own_system = self.autopilot[0]   # the fleet knows this drone by its vehicle's system id
+        estimate = self.perception.drone.state
+        flying = self.sequencer.state.streaming and self.state.mode is LoopMode.TRACKING
+        ex = self.executor
+        return self.announcer.outbox(t_s, estimate, ex.plan if flying else None, ex.plan_t0_v, ex.plan_p0)
+
+    def _tick(self, t_s: float) -> Outbox:
         self.cycle.begin_tick()
         out: Outbox = self.supervisor.heartbeat(t_s)
         out.extend(self.goal_stage.before_sequence(t_s, self.autopilot))

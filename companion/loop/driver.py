@@ -75,12 +75,17 @@ class Driver:
         :meth:`receive` (``t_s`` the receive time) and each tick's outbox (``t_s`` the tick time).
     recorder : Recorder, optional
         Told every message handled, packet sent, tick, plan arrival and hand-back (None: nothing recorded).
+    fleet_port : Port, optional
+        Where each tick's :attr:`Companion.fleet_outbox` goes (the fleet link); not recorded
+        (what a replay needs of the fleet is what was heard). None: nothing sent.
     """
 
-    def __init__(self, companion: Companion, port: Port, recorder: Recorder | None = None) -> None:
+    def __init__(self, companion: Companion, port: Port, recorder: Recorder | None = None,
+                 fleet_port: Port | None = None) -> None:
         self.companion = companion
         self.port = port
         self.recorder = recorder
+        self.fleet_port = fleet_port
         self.ticks = 0              #: ticks driven
         self.setpoints = 0          #: ticks whose outbox ended with a setpoint
         self.streamed = False       #: the last tick sent a setpoint (its outbox's last message)
@@ -117,6 +122,9 @@ class Driver:
             packet = send(msg, t_s)  # stamped with the tick time: a replay ticks at the same times
             if rec is not None:
                 rec.sent(t_s, packet)
+        if self.fleet_port is not None:
+            for msg in companion.fleet_outbox:
+                self.fleet_port.send(msg, t_s)
         self.ticks += 1
         self.streamed = bool(outbox) and outbox[-1].get_type() == _SETPOINT
         self.setpoints += self.streamed

@@ -6,6 +6,8 @@
     intent_growth_m2ps = 0.02        # m^2/s: a peer's variance about its announced plan grows so
     intent_stale_s = 1.0             # s: an intent older than this is not used (constant velocity instead)
     max_peers = 32
+    state_rate_hz = 10.0             # Hz: this drone's ODOMETRY on the fleet link
+    intent_resend_s = 0.5            # s: the intent in force is sent again this often (and at every new plan)
 
 Coordination (docs/FLEET.md):
 
@@ -27,6 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from companion import validation as check
+from companion.errors import ConfigError
 
 COORDINATION_MODES = ("decentralised", "distributed", "prioritised")
 
@@ -40,6 +43,8 @@ class FleetConfig:
     intent_growth_m2ps: float = 0.02
     intent_stale_s: float = 1.0
     max_peers: int = 32
+    state_rate_hz: float = 10.0
+    intent_resend_s: float = 0.5
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -49,3 +54,8 @@ class FleetConfig:
         set_("intent_growth_m2ps", check.number("intent_growth_m2ps", self.intent_growth_m2ps, lo=0.0, hi=100.0))
         set_("intent_stale_s", check.number("intent_stale_s", self.intent_stale_s, positive=True, hi=60.0))
         set_("max_peers", check.integer("max_peers", self.max_peers, lo=1, hi=255))
+        set_("state_rate_hz", check.number("state_rate_hz", self.state_rate_hz, lo=0.5, hi=50.0))
+        set_("intent_resend_s", check.number("intent_resend_s", self.intent_resend_s, lo=0.05, hi=10.0))
+        if self.intent_resend_s >= self.intent_stale_s:
+            raise ConfigError(f"intent_resend_s = {self.intent_resend_s:g} must be < intent_stale_s = "
+                              f"{self.intent_stale_s:g}: a peer would let the intent go stale between sendings")

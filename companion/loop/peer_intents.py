@@ -39,12 +39,13 @@ class PeerIntents:
     Parameters
     ----------
     config : the ``[fleet]`` section.
-    own_system : this drone's MAVLink system id (its priority in ``prioritised``).
+    own_system : this drone's MAVLink system id (its priority in ``prioritised``); None until the
+        vehicle is known (then no peer outranks it and none gives way).
     """
 
-    def __init__(self, config: FleetConfig, own_system: int) -> None:
+    def __init__(self, config: FleetConfig, own_system: int | None) -> None:
         self.config = config
-        self.own_system = int(own_system)
+        self.own_system = None if own_system is None else int(own_system)
         self._intents: dict[Hashable, Intent] = {}
         #: what happened to intents: ``received``, ``withdrawn``, ``evicted``, ``own`` (an intent under
         #: this drone's own system id, never used), ``used`` and ``stale`` (per track and replan)
@@ -90,12 +91,12 @@ class PeerIntents:
 
     def _outranks_me(self, key: Hashable) -> bool:
         system = system_of(key)
-        return system is not None and system < self.own_system
+        return system is not None and self.own_system is not None and system < self.own_system
 
     def gives_way(self, key: Hashable, t_v: float) -> bool:
         """Whether the plan leaves ``key`` out: ``prioritised``, a peer of lower priority (higher
         system id) with a fresh intent, which gives way to this drone."""
-        if self.config.coordination != "prioritised" or self._outranks_me(key):
+        if self.config.coordination != "prioritised" or self.own_system is None or self._outranks_me(key):
             return False
         return system_of(key) is not None and self.fresh(key, t_v) is not None
 

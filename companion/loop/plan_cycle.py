@@ -272,6 +272,8 @@ class PlanCycle:
                 command=np.asarray(plan.commands[0]).copy() if status is not PlanStatus.FAILED else np.zeros(3),
                 t_applied_s=t_s,
                 tracks_unconstrained=len(job.tracks_unconstrained),
+                tracks_giving_way=len(job.tracks_giving_way),
+                tracks_along_intent=len(job.tracks_along_intent),
                 planned_contour=planned_contour,
             )
         )

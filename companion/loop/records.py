@@ -70,6 +70,8 @@ class ReplanRecord:
     (empty for a failed plan): the promise the plan makes. ``tracks_unconstrained`` counts
     tracks in the request that the planner was not asked to avoid (over the
     ``max_constrained_tracks`` limit, see :mod:`companion.loop.track_selection`).
+    ``tracks_giving_way`` and ``tracks_along_intent`` count the fleet's peers left out (they
+    give way) and predicted along their announced plans (:mod:`companion.loop.peer_intents`).
     """
 
     t_link_s: float
@@ -91,6 +93,8 @@ class ReplanRecord:
     t_applied_s: float = 0.0
     tracks_unconstrained: int = 0
     planned_contour: dict = field(default_factory=dict)
+    tracks_giving_way: int = 0
+    tracks_along_intent: int = 0
 
 
 @dataclass

@@ -14,8 +14,8 @@ has no per-point time). Accelerations and yaw are NaN and ``command`` UINT16_MAX
 as the message defines them). ``valid_points`` 0 withdraws an intent (the sender has no
 plan in force).
 
-Pure: encoding takes a pymavlink ``MAVLink`` object only to build messages; decoding
-never raises and returns :class:`IntentReport` or
+Pure: the encoders build messages (the link packs them under its own system and
+component id); decoding never raises and returns :class:`IntentReport` or
 :class:`~companion.mavlink.messages.Rejected`.
 """
 
@@ -74,13 +74,13 @@ def _upper_triangle(position_cov: np.ndarray | None, block: int) -> list[float]:
     return out
 
 
-def encode_state(mav: mavlink2.MAVLink, time_usec: int, position: np.ndarray, velocity: np.ndarray,
+def encode_state(time_usec: int, position: np.ndarray, velocity: np.ndarray,
                  position_cov: np.ndarray, velocity_cov: np.ndarray | None,
                  reset_counter: int = 0) -> mavlink2.MAVLink_odometry_message:
     """ODOMETRY of the sender's own vehicle (NED m, m/s; covariances m^2, m^2/s^2)."""
     p = np.asarray(position, dtype=float)
     v = np.asarray(velocity, dtype=float)
-    return mav.odometry_encode(
+    return mavlink2.MAVLink_odometry_message(
         int(time_usec), mavlink2.MAV_FRAME_LOCAL_NED, mavlink2.MAV_FRAME_LOCAL_NED,
         float(p[0]), float(p[1]), float(p[2]), [math.nan, math.nan, math.nan, math.nan],
         float(v[0]), float(v[1]), float(v[2]), math.nan, math.nan, math.nan,
@@ -89,7 +89,7 @@ def encode_state(mav: mavlink2.MAVLink, time_usec: int, position: np.ndarray, ve
     )
 
 
-def encode_intent(mav: mavlink2.MAVLink, time_usec: int, positions: np.ndarray | None,
+def encode_intent(time_usec: int, positions: np.ndarray | None,
                   velocities: np.ndarray | None) -> mavlink2.MAVLink_trajectory_representation_waypoints_message:
     """TRAJECTORY_REPRESENTATION_WAYPOINTS of up to five knots ((K, 3) NED m and m/s);
     ``None`` (or K = 0) withdraws the intent."""
@@ -102,7 +102,7 @@ def encode_intent(mav: mavlink2.MAVLink, time_usec: int, positions: np.ndarray |
         if k:
             a[:k] = np.asarray(arr, dtype=float)
         cols.extend(a[:, i].tolist() for i in range(3))
-    return mav.trajectory_representation_waypoints_encode(
+    return mavlink2.MAVLink_trajectory_representation_waypoints_message(
         int(time_usec), k, *cols, _NAN5, _NAN5, _NAN5, _NAN5, _NAN5, _UNUSED_COMMANDS)
 
 

@@ -40,10 +40,12 @@ from typing import Hashable
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
+from companion.core.intent import Intent
 from companion.loop.intake.source_clocks import SourceClock
+from companion.loop.peer_intents import PeerIntents
 from companion.loop.intake.traffic_config import AUTOPILOT_LINK, SourcePolicy, TrafficConfig, obstacle_link_name
 from companion.loop.vehicle_reference import MessageRequest, VehicleReference
-from companion.mavlink import messages, traffic
+from companion.mavlink import fleet, messages, traffic
 from companion.mavlink.link import Received
 
 logger = logging.getLogger(__name__)
@@ -56,6 +58,8 @@ _ORIGIN_REQUEST_PERIOD_S = 2.0
 _DUPLICATE_WINDOW_S = 1.0
 _DUPLICATE_LATLON_LSB = 2  # PX4 truncates lat/lon of what it re-streams by about 1 cm (1 LSB)
 _MAX_SOURCES = 1024  # bounds per-source state whatever arrives
+#: A peer's plan may start this far after its intent arrives (s): its planner's lead, with room; more is garbage.
+_MAX_INTENT_LEAD_S = 2.0
 Severity = int
 
 
@@ -118,10 +122,14 @@ class ObstacleIntake:
     reference : VehicleReference, optional
         The vehicle's origin and home, shared with whatever else places geodetic points
         (default: one of its own).
+    peers : PeerIntents, optional
+        Where the fleet's intents (TRAJECTORY_REPRESENTATION_WAYPOINTS on an obstacle link,
+        :mod:`companion.mavlink.fleet`) go, on the vehicle's time base; None: intents are ignored.
     """
 
     def __init__(self, config: TrafficConfig, tracker, vehicle_time: Callable[[float], float | None],
-                 default_radius_m: float, reference: VehicleReference | None = None) -> None:
+                 default_radius_m: float, reference: VehicleReference | None = None,
+                 peers: PeerIntents | None = None) -> None:
         self.config = config
         self.tracker = tracker
         self.vehicle_time = vehicle_time
@@ -147,6 +155,7 @@ class ObstacleIntake:
         self._measured_geoid_m: float | None = None  # from the autopilot's GPS_RAW_INT
         self._geoid_request = _MessageRequest(MSG_GPS_RAW_INT, _ORIGIN_REQUEST_PERIOD_S, _MAX_GEOID_REQUESTS)
         self._geoid_given_up = False
+        self.peers = peers
 
     @property
     def origin(self) -> traffic.GlobalOrigin | None:
@@ -190,6 +199,8 @@ class ObstacleIntake:
                 self._reject(f"{link} sys {key[0]}", f"wrong link: {mtype} of the autopilot's system", rx.t_s)
             elif mtype in traffic.TRAFFIC_KINDS:
                 self._take(rx, link, autopilot)
+            elif mtype == "TRAJECTORY_REPRESENTATION_WAYPOINTS" and self.peers is not None:
+                self._take_intent(rx, link)
             return True  # an obstacle link never drives the vehicle side
         if mtype not in traffic.TRAFFIC_KINDS:
             return False
@@ -239,6 +250,40 @@ class ObstacleIntake:
             return
         track = _track_key(link, decoded.identity)
         self._fuse(track, source, decoded, policy, rx.t_s)
+
+    def _take_intent(self, rx: Received, link: str) -> None:
+        """A peer's intent, placed on the vehicle's time base through its state announcements' clock.
+
+        The intent's stamp is the time of its first knot on the sender's clock (the plan's
+        start, which may be ahead of the sending): it is mapped with the clock its ODOMETRY
+        built (:meth:`SourceClock.peek`), not fed to it. Before the peer's first state
+        announcement there is no clock: the intent waits (counted).
+        """
+        key = messages.source_key(rx.msg)
+        source = f"{link} sys {key[0]}"
+        decoded = fleet.decode_intent(rx.msg)
+        if isinstance(decoded, messages.Rejected):
+            self._reject(source, f"intent {_reason_code(decoded.reason)}", rx.t_s)
+            return
+        track = (key[0], key[1], link)
+        clock = self._clocks.get(track)
+        t_link = None if clock is None else clock.peek(decoded.stamp, 1e-6)
+        if t_link is None:
+            self.waiting[(source, "intent before its state (no clock)")] += 1
+            return
+        if t_link > rx.t_s + _MAX_INTENT_LEAD_S:
+            self._reject(source, f"intent starts more than {_MAX_INTENT_LEAD_S:g} s ahead", rx.t_s)
+            return
+        t_v = self.vehicle_time(t_link)
+        if t_v is None:
+            self.waiting[(source, "vehicle time unknown")] += 1
+            return
+        if decoded.positions.shape[0] == 0:
+            self.peers.update(track, None)
+            return
+        self.peers.update(track, Intent(t0_s=t_v, spacing_s=self.peers.config.intent_knot_spacing_s,
+                                        positions=decoded.positions, velocities=decoded.velocities))
+        self.accepted[f"{source} intent"] += 1
 
     def _is_duplicate(self, icao: int, msg, t_rx: float) -> bool:
         last = self._last_adsb.get(icao)
@@ -346,6 +391,9 @@ class ObstacleIntake:
             texts.append((mavlink2.MAV_SEVERITY_WARNING, f"obstacles: {len(names) - _DROPS_NAMED} more tracks dropped"))
         for name in names:
             logger.info("obstacle %s: %s", name, why)
+        if self.peers is not None:
+            for key in gone:
+                self.peers.forget(key)
         return texts
 
     def summary(self) -> dict:

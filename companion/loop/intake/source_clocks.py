@@ -117,6 +117,7 @@ class SourceClock:
         self._unit = 1.0
         self._bins: deque[list[float]] = deque(maxlen=_MAX_BINS)  # [bin start t_rx, t_rx at min, min offset]
         self._last_rel: float | None = None
+        self._last_t_rx = 0.0  # arrival of the last stamp mapped (drift is evaluated there by peek)
         self._fit: tuple[float, float, float] | None = None  # (offset at t_mean, drift, t_mean) of the bins now
 
     def _relative(self, raw: int | float, unit_s: float) -> float:
@@ -187,7 +188,22 @@ class SourceClock:
         clamped = t_map > t_rx + _CLAMP_REPORT_S
         t_map = min(t_map, t_rx)
         self._last_rel = rel
+        self._last_t_rx = t_rx
         return Mapped(t_s=t_map, restarted=restarted, clamped=clamped, offset_s=offset, drift=drift)
+
+    def peek(self, raw: int | float, unit_s: float = 1.0) -> float | None:
+        """Link time (s) of a stamp by the current estimate, leaving the estimate as it is; None
+        before any stamp of this epoch, in another unit, or non-finite.
+
+        For stamps that are not arrival-like: a time the sender names (for example the start
+        of a plan it announces, which may lie ahead of its sending) says nothing about the
+        link's delay, so it must not shape the envelope; nor is it clamped to arrival.
+        """
+        if self._origin is None or unit_s != self._unit or not math.isfinite(float(raw)) or self._last_rel is None:
+            return None
+        rel = self._relative(raw, unit_s)
+        est = self.estimate(self._last_t_rx)
+        return None if est is None else rel + est[0]
 
     def _restart(self, raw: int | float, unit_s: float) -> bool:
         self._origin = raw if isinstance(raw, int) else float(raw)

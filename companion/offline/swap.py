@@ -1,0 +1,83 @@
+"""The swap: N drones on a circle fly to the antipodal points, with moving traffic across.
+
+After the circle scenario of the multi-MAV chance-constrained MPC literature: drone i
+starts at angle ``2 pi i / N`` on a circle of ``radius_m`` about the centre (NED north,
+east at ``altitude``) and flies to the opposite point, so every pair meets near the
+centre. ``traffic`` adds two aircraft that cross the circle at 1.5 m/s on chords, as the
+antipodal encounter's obstacles do (on their own obstacle link, ODOMETRY). Each drone's
+scenario is the base file's (planner, estimator, loop, simulator) with its own start and
+goal; the world (the traffic) is the same for all.
+
+Pure: builds parsed-TOML dicts (:func:`companion.offline.harness.run_lockstep` and
+:func:`companion.offline.fleet_harness.run_fleet_lockstep` take them).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+
+import numpy as np
+
+from companion.loop.config import read_scenario_toml
+
+__all__ = ["swap_scenarios", "DEFAULT_BASE"]
+
+#: The base scenario: the antipodal encounter's planner, estimator, loop and simulator settings.
+DEFAULT_BASE = Path(__file__).resolve().parents[2] / "configs" / "antipodal.toml"
+_TRAFFIC_SPEED_MPS = 1.5
+
+
+def _traffic(radius_m: float, altitude: float, template: dict) -> list[dict]:
+    """Two aircraft crossing the circle on chords 0.35 radius off the centre, opposite ways."""
+    out = []
+    for k, (bearing, offset) in enumerate([(math.radians(30.0), 0.35), (math.radians(210.0), 0.35)]):
+        direction = np.array([math.cos(bearing), math.sin(bearing)])
+        normal = np.array([-direction[1], direction[0]])
+        half = 1.6 * radius_m
+        start = -half * direction + offset * radius_m * normal
+        end = half * direction + offset * radius_m * normal
+        ob = copy.deepcopy(template)
+        ob.update(name=f"traffic-{k + 1}", start_ned_m=[float(start[0]), float(start[1]), altitude],
+                  waypoints_ned_m=[[float(end[0]), float(end[1]), altitude]], speed_mps=_TRAFFIC_SPEED_MPS)
+        out.append(ob)
+    return out
+
+
+def swap_scenarios(n: int, *, radius_m: float = 6.0, altitude: float = -5.0, traffic: bool = True,
+                   base: str | Path | dict = DEFAULT_BASE, duration_s: float | None = None) -> list[dict]:
+    """The N drones' scenarios (parsed-TOML dicts), drone i's at index i.
+
+    Parameters
+    ----------
+    n : drones, 2 to 16.
+    radius_m : the circle's radius, m (> 1).
+    altitude : NED down of the circle, m (negative: above the origin).
+    traffic : two crossing aircraft (else no obstacles but the drones themselves).
+    base : scenario file or parsed dict the settings come from (its obstacles are replaced).
+    duration_s : the run's length (default: the base's).
+    """
+    if not 2 <= int(n) <= 16:
+        raise ValueError(f"a swap needs 2 to 16 drones, got {n}")
+    if not radius_m > 1.0:
+        raise ValueError(f"the swap's radius must be > 1 m, got {radius_m}")
+    data = copy.deepcopy(base) if isinstance(base, dict) else read_scenario_toml(base)
+    template = (data.get("world", {}).get("obstacles") or [{}])[0]
+    world = dict(data.get("world", {}))
+    world["obstacles"] = _traffic(radius_m, altitude, template) if traffic else []
+    out = []
+    for i in range(int(n)):
+        angle = 2.0 * math.pi * i / n
+        start = [radius_m * math.cos(angle), radius_m * math.sin(angle), altitude]
+        goal = [-start[0], -start[1], altitude]
+        d = copy.deepcopy(data)
+        d["scenario"] = {**d.get("scenario", {}), "name": f"swap{n}-drone{i + 1}",
+                         "description": f"drone {i + 1} of {n} swapping across a {2 * radius_m:g} m circle"}
+        if duration_s is not None:
+            d["scenario"]["duration_s"] = float(duration_s)
+        d["vehicle"] = {**d.get("vehicle", {}), "start_ned_m": [round(x, 6) for x in start]}
+        d["mission"] = {**d.get("mission", {}), "goal_ned_m": [round(x, 6) for x in goal]}
+        d["world"] = copy.deepcopy(world)
+        out.append(d)
+    return out

@@ -1,0 +1,47 @@
+"""Two companions swapping places in lockstep, each knowing the other only by its announcements
+(companion/offline/fleet_harness.py, swap.py)."""
+
+import numpy as np
+import pytest
+
+from companion.offline.fleet_harness import FLEET_LINK, run_fleet_lockstep
+from companion.offline.swap import swap_scenarios
+
+
+def test_that_the_swap_puts_drones_on_a_circle_bound_for_the_opposite_points():
+    scenarios = swap_scenarios(4, radius_m=6.0)
+    starts = np.array([s["vehicle"]["start_ned_m"] for s in scenarios])
+    goals = np.array([s["mission"]["goal_ned_m"] for s in scenarios])
+    assert np.allclose(np.linalg.norm(starts[:, :2], axis=1), 6.0) and np.allclose(goals, starts * [-1, -1, 1])
+    assert len({s["scenario"]["name"] for s in scenarios}) == 4
+    assert all(s["world"] == scenarios[0]["world"] for s in scenarios) and len(scenarios[0]["world"]["obstacles"]) == 2
+    with pytest.raises(ValueError, match="2 to 16"):
+        swap_scenarios(1)
+
+
+@pytest.mark.parametrize("mode", ["distributed", "prioritised"])
+def test_that_two_drones_sharing_their_plans_swap_without_touching_and_keep_c_min_between_them(mode):
+    result = run_fleet_lockstep(swap_scenarios(2, traffic=False), seed=0, coordination=mode)
+    s = result.summary()
+    assert s["goal_reached"] and not s["collided"], s
+    assert s["min_pair_clearance_m"] > 0.2, s
+    c_min = result.drones[0].companion.scenario.planner.c_min
+    assert s["min_peer_realised_contour"] >= c_min, s          # the promise, judged on the estimates
+    assert s["fleet_packets"] > 200
+    for d in result.drones:
+        peers = [k for k in d.companion.tracker.keys() if isinstance(k, tuple) and k[-1] == FLEET_LINK]
+        assert len(peers) == 1                                 # the other drone, heard on the fleet link only
+        assert d.companion.peers.summary()["intents_received"] > 10
+    if mode == "distributed":
+        assert all(d.companion.peers.counts["used"] > 0 for d in result.drones)
+    else:   # drone 1 outranks drone 2: it leaves drone 2 out, drone 2 plans around drone 1's intent
+        assert result.drones[0].companion.peers.counts["used"] == 0
+        assert result.drones[1].companion.peers.counts["used"] > 0
+        assert any(r.tracks_giving_way for r in result.drones[0].companion.records)
+        assert any(r.tracks_along_intent for r in result.drones[1].companion.records)
+
+
+def test_that_a_fleet_run_is_the_same_bits_for_the_same_seed():
+    a = run_fleet_lockstep(swap_scenarios(2, traffic=False), seed=3, duration_s=6.0).summary()
+    b = run_fleet_lockstep(swap_scenarios(2, traffic=False), seed=3, duration_s=6.0).summary()
+    assert a == b
