@@ -53,6 +53,7 @@ from companion.loop.planning import InlinePlanning, PlanningService
 from companion.loop.fleet_announcer import FleetAnnouncer
 from companion.loop.peer_intents import PeerIntents
 from companion.loop.records import CompanionState, LoopMode, ReplanRecord
+from companion.loop.right_of_way import RightOfWay
 from companion.loop.request_builder import RequestBuilder
 from companion.loop.supervisor import Supervisor
 from companion.loop.vehicle_reference import VehicleReference
@@ -128,7 +129,8 @@ class Companion:
         #: the geofence the plans keep to (default: the scenario's, :func:`~companion.loop.fence_source.scenario_fence`)
         self.fence = fence if fence is not None else scenario_fence(scenario.mission, self.reference, plan)
         self.builder = RequestBuilder(scenario, obstacle_radius=self.obstacles.radius, goal=goal,
-                                      sources=obstacle_sources, fence=self.fence, peers=self.peers)
+                                      sources=obstacle_sources, fence=self.fence, peers=self.peers,
+                                      right_of_way=_right_of_way(scenario) if fleet else None)
         self.executor = Executor(scenario.planner, 1.0 / self.settings.setpoint_rate_hz, self.planner.lag,
                                  max_plan_age_s=self.settings.max_plan_age_s)
         self.state = CompanionState()
@@ -255,3 +257,12 @@ class Companion:
         if why is not None:  # this tick's request; it goes out with the next tick's commands
             self.sequencer.hand_back(t_s, why)
         return out
+
+
+def _right_of_way(scenario: CompanionScenario) -> RightOfWay | None:
+    """The fleet's rules of the road for this drone (``[fleet] keep_right``), or None."""
+    fleet = scenario.fleet
+    if not fleet.keep_right:
+        return None
+    return RightOfWay(scenario.planner.horizon_steps * scenario.planner.step_s, after_s=fleet.deadlock_after_s,
+                      progress_m=fleet.deadlock_progress_m, recovery_s=fleet.recovery_s)

@@ -8,6 +8,10 @@
     max_peers = 32
     state_rate_hz = 10.0             # Hz: this drone's ODOMETRY on the fleet link
     intent_resend_s = 0.5            # s: the intent in force is sent again this often (and at every new plan)
+    keep_right = true                # the tie-break: a drone meeting a peer moves its target to the right
+    deadlock_after_s = 6.0           # s without progress_m toward the goal, a peer near: a deadlock
+    deadlock_progress_m = 0.5
+    recovery_s = 4.0                 # s of a wider move to the right after a deadlock
 
 Coordination (docs/FLEET.md):
 
@@ -19,6 +23,11 @@ Coordination (docs/FLEET.md):
   higher-priority peers along their fresh intents (as fixed) and leaves the lower-priority
   peers out of its plan while their intents are fresh (they give way); a peer without a fresh
   intent is an ordinary track, whatever its priority.
+
+Right of way (:mod:`companion.loop.right_of_way`): with ``keep_right`` a drone that meets a
+peer moves its target to the right of its way, so drones that meet pass left side to left
+side; no progress toward the goal for ``deadlock_after_s`` with a peer near is a deadlock
+(counted), followed by a wider move right for ``recovery_s``.
 
 ``intent_knot_spacing_s`` must be the same for the whole fleet: the intent's message has no
 per-point time (:mod:`companion.mavlink.fleet`).
@@ -45,6 +54,10 @@ class FleetConfig:
     max_peers: int = 32
     state_rate_hz: float = 10.0
     intent_resend_s: float = 0.5
+    keep_right: bool = True
+    deadlock_after_s: float = 6.0
+    deadlock_progress_m: float = 0.5
+    recovery_s: float = 4.0
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -56,6 +69,10 @@ class FleetConfig:
         set_("max_peers", check.integer("max_peers", self.max_peers, lo=1, hi=255))
         set_("state_rate_hz", check.number("state_rate_hz", self.state_rate_hz, lo=0.5, hi=50.0))
         set_("intent_resend_s", check.number("intent_resend_s", self.intent_resend_s, lo=0.05, hi=10.0))
+        check.boolean("keep_right", self.keep_right)
+        set_("deadlock_after_s", check.number("deadlock_after_s", self.deadlock_after_s, positive=True, hi=600.0))
+        set_("deadlock_progress_m", check.number("deadlock_progress_m", self.deadlock_progress_m, lo=0.0, hi=100.0))
+        set_("recovery_s", check.number("recovery_s", self.recovery_s, lo=0.0, hi=600.0))
         if self.intent_resend_s >= self.intent_stale_s:
             raise ConfigError(f"intent_resend_s = {self.intent_resend_s:g} must be < intent_stale_s = "
                               f"{self.intent_stale_s:g}: a peer would let the intent go stale between sendings")

@@ -47,6 +47,7 @@ class PeerIntents:
         self.config = config
         self.own_system = None if own_system is None else int(own_system)
         self._intents: dict[Hashable, Intent] = {}
+        self._peers: set[Hashable] = set()   # keys that ever announced an intent (bounded as the intents)
         #: what happened to intents: ``received``, ``withdrawn``, ``evicted``, ``own`` (an intent under
         #: this drone's own system id, never used), ``used`` and ``stale`` (per track and replan)
         self.counts: Counter = Counter()
@@ -59,6 +60,8 @@ class PeerIntents:
         if system_of(key) == self.own_system:
             self.counts["own"] += 1
             return
+        if key not in self._peers and len(self._peers) < 4 * self.config.max_peers:
+            self._peers.add(key)
         if intent is None:
             if self._intents.pop(key, None) is not None:
                 self.counts["withdrawn"] += 1
@@ -76,8 +79,14 @@ class PeerIntents:
         self.counts["received"] += 1
 
     def forget(self, key: Hashable) -> None:
-        """Drop ``key``'s intent (its track was dropped)."""
+        """Drop ``key``'s intent (its track was dropped): it is no longer a peer."""
         self._intents.pop(key, None)
+        self._peers.discard(key)
+
+    def is_peer(self, key: Hashable) -> bool:
+        """Whether ``key`` has announced an intent (even one withdrawn since): a drone of the fleet,
+        which keeps the fleet's rules of the road (:mod:`companion.loop.right_of_way`)."""
+        return key in self._peers
 
     def keys(self) -> list:
         return list(self._intents)

@@ -24,6 +24,7 @@ from companion.loop.goal import GoalSource, ScenarioGoal, leads_the_way
 from companion.loop.obstacle_sources import ObstacleSource, StaticObstacles
 from companion.loop.peer_intents import PeerIntents
 from companion.loop.perception import Perception
+from companion.loop.right_of_way import RightOfWay
 from companion.loop.track_selection import beyond_walls, choose, confidence_radius, rank_by_risk, reach_m
 from estimator.models import propagate_position
 
@@ -116,12 +117,15 @@ class RequestBuilder:
     peers : PeerIntents, optional
         The fleet's intents: peers predicted along their announced plans, or left out when
         they give way (:mod:`companion.loop.peer_intents`); None: every track at constant velocity.
+    right_of_way : RightOfWay, optional
+        The fleet's rules of the road: the target moved right when a peer is met, and out of a
+        standoff (:mod:`companion.loop.right_of_way`); needs ``peers``.
     """
 
     def __init__(self, scenario: CompanionScenario,
                  obstacle_radius: Callable[[Hashable], float] | None = None, *,
                  goal: GoalSource | None = None, sources: Sequence[ObstacleSource] | None = None,
-                 fence=None, peers: PeerIntents | None = None) -> None:
+                 fence=None, peers: PeerIntents | None = None, right_of_way: RightOfWay | None = None) -> None:
         self.scenario = scenario
         self.cfg = scenario.planner
         self.settings = scenario.companion
@@ -137,6 +141,8 @@ class RequestBuilder:
         self.fence = fence
         #: the fleet's intents (None: no fleet)
         self.peers = peers
+        #: the fleet's rules of the road (None: none)
+        self.right_of_way = right_of_way if peers is not None else None
 
     # ------------------------------------------------------------------ estimates
 
@@ -247,6 +253,12 @@ class RequestBuilder:
             fence_normal, fence_offset = self.fence.walls(position)
             walls_normal = np.concatenate([walls_normal, fence_normal])
             walls_offset = np.concatenate([walls_offset, fence_offset])
+        if self.right_of_way is not None:
+            # the peers this plan avoids (not those that give way), with how near counts as meeting
+            peers = [(now_pos[k], tracker.state(k).velocity,
+                      drone_reach + reach_m(self.obstacle_radius(k), now_cov[k], self._sigmas))
+                     for k in (*constrained, *left_out) if self.peers.is_peer(k)]
+            target = self.right_of_way.target(t_v, position, initial_velocity, target, goal, peers)
         request = PlanRequest(
             position=position,
             velocity=initial_velocity,

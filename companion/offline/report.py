@@ -68,6 +68,10 @@ def companion_report(companion: Companion) -> dict:
         report["goal_error"] = companion.goal_error
     if getattr(companion, "fence", None) is not None:   # a geofence was flown: how far inside it the estimate kept
         report["min_fence_clearance_m"] = state.min_fence_clearance_m
+    if getattr(companion, "peers", None) is not None:   # in a fleet: intents heard and used, rules of the road
+        row = companion.builder.right_of_way
+        report["fleet"] = {"coordination": companion.scenario.fleet.coordination, **companion.peers.summary(),
+                           "sent": dict(companion.announcer.sent), **(row.summary() if row is not None else {})}
     return report
 
 
