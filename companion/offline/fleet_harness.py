@@ -80,14 +80,16 @@ class FleetResult:
             "drone_traffic_collisions": sum(drone_collided),
             "drone_drone_collisions": sum(pair_collided),
             "goal_reached": all(p.get("goal_reached") for p in per),
-            "time_to_all_goals_s": None if any(t is None for t in times) else max(times),
+            "time_to_all_goals_s": None if any(t is None for t in times) else round(max(times), 3),
             "min_pair_clearance_m": min(self.pair_min_clearance_m.values()) if self.pair_min_clearance_m else None,
             "pair_min_clearance_m": pairs,
             "min_peer_realised_contour": min(peer_contour) if peer_contour else None,
             "fleet_packets": self.fleet_packets,
             "sim_time_s": round(self.sim_time_s, 3),
-            "per_drone": [{k: p.get(k) for k in ("collided", "goal_reached", "time_to_goal_s", "min_true_clearance_m",
-                                                  "plans", "replans_with_slack", "failed_plans")} for p in per],
+            "per_drone": [{k: (round(p[k], 3) if isinstance(p.get(k), float) else p.get(k))
+                           for k in ("collided", "goal_reached", "time_to_goal_s", "min_true_clearance_m",
+                                     "replans", "replans_with_slack", "failed_plans", "min_realised_contour")}
+                          for p in per],
         }
 
 
