@@ -16,6 +16,8 @@ FORMULATIONS: tuple[str, ...] = ("hyperplane", "paper", "deterministic", "bhatta
 METHODS = ("hyperplane", "paper", "deterministic", "bhattacharyya")
 #: companion.offline.campaign.generate.FAMILIES
 FAMILIES = ("antipodal", "crossing", "corridor", "random")
+#: companion.loop.fleet_config.COORDINATION_MODES
+COORDINATION_MODES = ("decentralised", "distributed", "prioritised")
 #: companion.offline.campaign.generate.VEHICLES
 VEHICLES = ("lag", "px4", "ardupilot")
 #: companion.offline.campaign.generate.DEFAULT_DURATION_S

@@ -29,6 +29,7 @@ from companion.commands._argtypes import (
     seed,
 )
 from companion.commands._defaults import (
+    COORDINATION_MODES,
     DEFAULT_DURATION_S,
     EKF_CORRELATION_S,
     FAMILIES,
@@ -49,9 +50,10 @@ QUIET_LOGGERS = ("mavsim", "estimator", "companion.loop.app", "companion.core.pl
 
 def _methods(text: str) -> list[str]:
     names = [m.strip() for m in text.split(",") if m.strip()]
-    unknown = [m for m in names if m not in METHODS]
+    unknown = [m for m in names if m not in METHODS and m not in COORDINATION_MODES]
     if not names or unknown:
-        raise argparse.ArgumentTypeError(f"unknown method(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(METHODS)}")
+        raise argparse.ArgumentTypeError(f"unknown method(s) {', '.join(unknown) or '(none)'}; choose from "
+                                         f"{', '.join(METHODS)} (--family swap: {', '.join(COORDINATION_MODES)})")
     if len(set(names)) != len(names):
         raise argparse.ArgumentTypeError(f"method listed twice: {text}")
     return names
@@ -62,10 +64,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("campaign", help="Monte Carlo safety campaign: randomised encounters, per method",
                               description=__doc__.split("\n\n")[1], formatter_class=DefaultsHelpFormatter)
     cpus = os.cpu_count() or 1
-    p.add_argument("--family", choices=FAMILIES, default="antipodal", help="kind of encounter")
+    p.add_argument("--family", choices=(*FAMILIES, "swap"), default="antipodal",
+                   help="kind of encounter; swap: --drones N drones swapping places on a circle, with crossing "
+                        "traffic, the methods being coordination modes (docs/FLEET.md)")
+    p.add_argument("--drones", type=integer_between(2, 16, "a swap of 2 to 16 drones"), default=None, metavar="N",
+                   help="with --family swap: drones per episode (2 to 16)")
     p.add_argument("--episodes", type=integer_between(1, MAX_EPISODES, "the most one campaign holds"), default=20,
                    help=f"number of episodes (indices 0..N-1), at most {MAX_EPISODES}")
-    p.add_argument("--methods", type=_methods, default=list(METHODS), help="comma-separated planner formulations",
+    p.add_argument("--methods", type=_methods, default=None,
+                   help="comma-separated planner formulations (default: all); with --family swap, coordination modes "
+                        f"({','.join(COORDINATION_MODES)}; default: all)",
                    metavar=",".join(METHODS))
     p.add_argument("--seed", type=seed, default=0, help="campaign seed (episode i uses default_rng([seed, i]))")
     p.add_argument("--workers", type=integer_between(1, WORKERS_PER_CPU * cpus, f"{WORKERS_PER_CPU} per CPU, {cpus} CPUs"),
@@ -123,6 +131,16 @@ def run(args: argparse.Namespace) -> int:
         # table, not as hundreds of log lines from the worker processes.
         for name in QUIET_LOGGERS:
             logging.getLogger(name).setLevel(logging.ERROR)
+    if args.family == "swap":
+        return _run_swap(args)
+    if args.drones is not None:
+        raise ConfigError("--drones is for --family swap")
+    if args.methods is None:
+        args.methods = list(METHODS)
+    wrong = [m for m in args.methods if m not in METHODS]
+    if wrong:
+        raise ConfigError(f"--methods: {', '.join(wrong)} is a coordination mode (for --family swap); "
+                          f"the {args.family} family's methods are {', '.join(METHODS)}")
     if args.save_scenario and args.episode is None:
         raise ConfigError("--save-scenario needs --episode I (which episode to save)")
     episodes = [args.episode] if args.episode is not None else range(args.episodes)
@@ -153,6 +171,44 @@ def run(args: argparse.Namespace) -> int:
         for path in result.plot(args.plot):
             print(f"wrote {path}")
     return _exit_code(result, store)
+
+
+def _run_swap(args: argparse.Namespace) -> int:
+    """``--family swap``: a fleet campaign (:mod:`companion.offline.campaign.fleet`)."""
+    from companion.offline.campaign.fleet import format_fleet_table, run_fleet_campaign
+
+    if args.drones is None:
+        raise ConfigError("--family swap needs --drones N (2 to 16)")
+    modes = args.methods if args.methods is not None else list(COORDINATION_MODES)
+    wrong = [m for m in modes if m not in COORDINATION_MODES]
+    if wrong:
+        raise ConfigError(f"--methods: {', '.join(wrong)} is not a coordination mode; --family swap flies "
+                          f"{', '.join(COORDINATION_MODES)}")
+    for flag, used in (("--vehicle", args.vehicle != "lag"), ("--noise-correlation", args.noise_correlation > 0.0),
+                       ("--plot", args.plot), ("--save-scenario", args.save_scenario)):
+        if used:
+            raise ConfigError(f"{flag} is not available with --family swap")
+    episodes = [args.episode] if args.episode is not None else range(args.episodes)
+    store = Path(args.results) if args.results else (
+        None if args.episode is not None else
+        Path(args.json).with_suffix(".jsonl") if args.json else Path(f"campaign-swap{args.drones}-seed{args.seed}.jsonl"))
+    result = run_fleet_campaign(args.drones, episodes, modes, args.seed, workers=args.workers, c_min=args.c_min,
+                                duration_s=args.duration, results_path=store, resume=args.resume,
+                                scheduler=args.scheduler, progress=args.progress)
+    print(format_fleet_table(result.drones, result.summary, result.c_min))
+    if store is not None:
+        print(f"results: {store}")
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(result.to_json(), indent=1, default=float))
+        print(f"wrote {path}")
+    failed = [r for r in result.runs if r.error is not None]
+    if failed:
+        print(f"companion campaign: error: {len(failed)} of {len(result.runs)} runs ended with an error (first: episode "
+              f"{failed[0].episode} {failed[0].mode}: {' '.join(str(failed[0].error).split())[:300]})", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _exit_code(result, store: Path | None) -> int:

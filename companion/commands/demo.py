@@ -15,7 +15,7 @@ from typing import NamedTuple
 from companion.commands._argtypes import integer_at_least, positive_number, scenario_file, seed
 from companion.commands._view import add_view_arguments, open_view
 from companion.errors import ConfigError
-from companion.commands._defaults import FORMULATIONS, MAX_SYSTEMS
+from companion.commands._defaults import COORDINATION_MODES, FORMULATIONS, MAX_SYSTEMS
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -47,7 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="fly N drones (2 to 16), each with its own simulated autopilot and companion, the "
                         "scenario's start and goal rotated about their midpoint for each (the swap: "
                         "`demo swap --drones 4`); lockstep only (docs/FLEET.md)")
-    p.add_argument("--coordination", default=None, choices=("decentralised", "distributed", "prioritised"),
+    p.add_argument("--coordination", default=None, choices=COORDINATION_MODES,
                    help="with --drones: how the drones use each other's announced plans (default: the scenario's [fleet])")
     add_view_arguments(p)
     p.set_defaults(func=run)

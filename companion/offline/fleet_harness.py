@@ -37,12 +37,14 @@ from companion.offline.harness import LOCKSTEP_EPOCH_S, RunResult, ScenarioSourc
 from companion.offline.report import run_report
 from mavsim.lockstep import LockstepSimulator
 
-__all__ = ["FleetResult", "run_fleet_lockstep", "FLEET_COMPONENT", "FLEET_LINK"]
+__all__ = ["FleetResult", "run_fleet_lockstep", "FLEET_COMPONENT", "FLEET_LINK", "PAIR_RANGE_M"]
 
 #: The component id a companion announces its vehicle under (MAV_COMP_ID_ONBOARD_COMPUTER).
 FLEET_COMPONENT = 191
 #: The fleet link's name on each companion.
 FLEET_LINK = "fleet"
+#: Pairs of vehicles at most this far apart (m) count in the per-step collision frequency (the sensing range).
+PAIR_RANGE_M = 10.0
 
 
 @dataclass
@@ -56,6 +58,9 @@ class FleetResult:
     pair_min_clearance_m : {(i, j): that distance less the two radii, m (< 0: collided)}.
     sim_time_s : simulated seconds flown.
     fleet_packets : announcements carried between companions.
+    pair_ticks, pair_contact_ticks : (pair, tick) samples with the two vehicles within
+        :data:`PAIR_RANGE_M` of each other, and of those the ones in contact (distance below both
+        radii): the per-step collision frequency between drones is their ratio.
     """
 
     drones: list[RunResult]
@@ -63,6 +68,8 @@ class FleetResult:
     pair_min_clearance_m: dict
     sim_time_s: float
     fleet_packets: int = 0
+    pair_ticks: int = 0
+    pair_contact_ticks: int = 0
     extra: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
@@ -85,12 +92,20 @@ class FleetResult:
             "pair_min_clearance_m": pairs,
             "min_peer_realised_contour": min(peer_contour) if peer_contour else None,
             "fleet_packets": self.fleet_packets,
+            "deadlocks": sum(_deadlocks(d.companion) for d in self.drones),
+            "pair_ticks": self.pair_ticks,
+            "pair_contact_ticks": self.pair_contact_ticks,
             "sim_time_s": round(self.sim_time_s, 3),
             "per_drone": [{k: (round(p[k], 3) if isinstance(p.get(k), float) else p.get(k))
                            for k in ("collided", "goal_reached", "time_to_goal_s", "min_true_clearance_m",
                                      "replans", "replans_with_slack", "failed_plans", "min_realised_contour")}
                           for p in per],
         }
+
+
+def _deadlocks(companion: Companion) -> int:
+    row = companion.builder.right_of_way
+    return 0 if row is None else row.watch.deadlocks
 
 
 def _min_peer_contour(companion: Companion) -> float | None:
@@ -163,6 +178,7 @@ def run_fleet_lockstep(scenarios: Sequence[ScenarioSource], *, seed: int = 0, du
     positions = [s.truth.drone_position_ned_m.copy() for s in sims]
     bus: list[tuple[int, bytes]] = []   # (sender, packet) sent at the last tick, delivered at this one
     carried = 0
+    pair_ticks = pair_contacts = 0
     all_goals_t: float | None = None
     try:
         for _ in range(int(math.ceil(limit / dt - 1e-9))):
@@ -194,6 +210,10 @@ def run_fleet_lockstep(scenarios: Sequence[ScenarioSource], *, seed: int = 0, du
                 d = _closest_approach(positions[i], now[i], positions[j], now[j])
                 if d < pair_min[(i, j)]:
                     pair_min[(i, j)] = d
+                now_d = float(np.linalg.norm(now[i] - now[j]))
+                if now_d <= PAIR_RANGE_M:
+                    pair_ticks += 1
+                    pair_contacts += now_d < radii[i] + radii[j]
             positions = now
             if stop_after_goal_s is not None:
                 if all_goals_t is None and all(s.goal_reached_t_s is not None for s in sims):
@@ -209,6 +229,8 @@ def run_fleet_lockstep(scenarios: Sequence[ScenarioSource], *, seed: int = 0, du
             pair_min_clearance_m={(i, j): d - radii[i] - radii[j] for (i, j), d in pair_min.items()},
             sim_time_s=sims[0].time_s,
             fleet_packets=carried,
+            pair_ticks=pair_ticks,
+            pair_contact_ticks=int(pair_contacts),
         )
     finally:
         for link in (*links, *fleet_links, *(o for o in obstacle_links if o is not None)):

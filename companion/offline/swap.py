@@ -22,17 +22,30 @@ import numpy as np
 
 from companion.loop.config import read_scenario_toml
 
-__all__ = ["swap_scenarios", "rotated_fleet", "DEFAULT_BASE"]
+__all__ = ["swap_scenarios", "rotated_fleet", "DEFAULT_BASE", "SWAP_BASE", "DEFAULT_TRAFFIC"]
+
+def _shipped(name: str) -> Path:
+    """A shipped scenario file: the source tree's ``configs/`` when run from it, else the installed
+    package's (``companion.scenarios``)."""
+    here = Path(__file__).resolve().parents[2] / "configs" / name
+    if here.is_file():
+        return here
+    from importlib import resources
+
+    return Path(str(resources.files("companion.scenarios") / name))
+
 
 #: The base scenario: the antipodal encounter's planner, estimator, loop and simulator settings.
-DEFAULT_BASE = Path(__file__).resolve().parents[2] / "configs" / "antipodal.toml"
+DEFAULT_BASE = _shipped("antipodal.toml")
+#: The swap's own scenario (``configs/swap.toml``: [fleet] settings, the traffic's template).
+SWAP_BASE = _shipped("swap.toml")
 _TRAFFIC_SPEED_MPS = 1.5
 
 
-def _traffic(radius_m: float, altitude: float, template: dict) -> list[dict]:
-    """Two aircraft crossing the circle on chords 0.35 radius off the centre, opposite ways."""
+def _traffic(radius_m: float, altitude: float, template: dict, specs) -> list[dict]:
+    """Aircraft crossing the circle on chords: each spec (bearing rad, offset in radii, speed m/s)."""
     out = []
-    for k, (bearing, offset) in enumerate([(math.radians(30.0), 0.35), (math.radians(210.0), 0.35)]):
+    for k, (bearing, offset, speed) in enumerate(specs):
         direction = np.array([math.cos(bearing), math.sin(bearing)])
         normal = np.array([-direction[1], direction[0]])
         half = 1.6 * radius_m
@@ -40,13 +53,18 @@ def _traffic(radius_m: float, altitude: float, template: dict) -> list[dict]:
         end = half * direction + offset * radius_m * normal
         ob = copy.deepcopy(template)
         ob.update(name=f"traffic-{k + 1}", start_ned_m=[float(start[0]), float(start[1]), altitude],
-                  waypoints_ned_m=[[float(end[0]), float(end[1]), altitude]], speed_mps=_TRAFFIC_SPEED_MPS)
+                  waypoints_ned_m=[[float(end[0]), float(end[1]), altitude]], speed_mps=float(speed))
         out.append(ob)
     return out
 
 
+#: The default traffic: two aircraft on chords 0.35 radius off the centre, opposite ways, 1.5 m/s.
+DEFAULT_TRAFFIC = ((math.radians(30.0), 0.35, _TRAFFIC_SPEED_MPS), (math.radians(210.0), 0.35, _TRAFFIC_SPEED_MPS))
+
+
 def swap_scenarios(n: int, *, radius_m: float = 6.0, altitude: float = -5.0, traffic: bool = True,
-                   base: str | Path | dict = DEFAULT_BASE, duration_s: float | None = None) -> list[dict]:
+                   base: str | Path | dict = DEFAULT_BASE, duration_s: float | None = None,
+                   rotation_rad: float = 0.0, traffic_specs=None) -> list[dict]:
     """The N drones' scenarios (parsed-TOML dicts), drone i's at index i.
 
     Parameters
@@ -54,9 +72,13 @@ def swap_scenarios(n: int, *, radius_m: float = 6.0, altitude: float = -5.0, tra
     n : drones, 2 to 16.
     radius_m : the circle's radius, m (> 1).
     altitude : NED down of the circle, m (negative: above the origin).
-    traffic : two crossing aircraft (else no obstacles but the drones themselves).
-    base : scenario file or parsed dict the settings come from (its obstacles are replaced).
+    traffic : aircraft crossing the circle (else no obstacles but the drones themselves).
+    base : scenario file or parsed dict the settings come from (its obstacles are replaced;
+        the first is the template of the traffic's message and noise).
     duration_s : the run's length (default: the base's).
+    rotation_rad : drone i starts at angle ``rotation_rad + 2 pi i / n`` (from north, towards east).
+    traffic_specs : the crossing aircraft as (bearing rad, offset in radii, speed m/s) each
+        (default :data:`DEFAULT_TRAFFIC`).
     """
     if not 2 <= int(n) <= 16:
         raise ValueError(f"a swap needs 2 to 16 drones, got {n}")
@@ -65,10 +87,11 @@ def swap_scenarios(n: int, *, radius_m: float = 6.0, altitude: float = -5.0, tra
     data = copy.deepcopy(base) if isinstance(base, dict) else read_scenario_toml(base)
     template = (data.get("world", {}).get("obstacles") or [{}])[0]
     world = dict(data.get("world", {}))
-    world["obstacles"] = _traffic(radius_m, altitude, template) if traffic else []
+    specs = DEFAULT_TRAFFIC if traffic_specs is None else tuple(traffic_specs)
+    world["obstacles"] = _traffic(radius_m, altitude, template, specs) if traffic else []
     out = []
     for i in range(int(n)):
-        angle = 2.0 * math.pi * i / n
+        angle = rotation_rad + 2.0 * math.pi * i / n
         start = [radius_m * math.cos(angle), radius_m * math.sin(angle), altitude]
         goal = [-start[0], -start[1], altitude]
         d = copy.deepcopy(data)

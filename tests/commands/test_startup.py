@@ -28,6 +28,7 @@ SOURCES = {
     "METHODS": ("companion.offline.campaign.generate", "METHODS"),
     "FAMILIES": ("companion.offline.campaign.generate", "FAMILIES"),
     "VEHICLES": ("companion.offline.campaign.generate", "VEHICLES"),
+    "COORDINATION_MODES": ("companion.loop.fleet_config", "COORDINATION_MODES"),
     "DEFAULT_DURATION_S": ("companion.offline.campaign.generate", "DEFAULT_DURATION_S"),
     "EKF_CORRELATION_S": ("companion.offline.campaign.generate", "EKF_CORRELATION_S"),
     "MAX_DURATION_S": ("companion.offline.campaign.generate", "MAX_DURATION_S"),
