@@ -26,7 +26,6 @@ import logging
 import math
 import os
 import time
-from concurrent.futures import Future, as_completed
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -37,7 +36,7 @@ from companion.errors import ConfigError, InputError
 from companion.loop.fleet_config import COORDINATION_MODES
 from companion.offline.campaign.generate import episode_sim_seed
 from companion.offline.campaign.progress import Progress
-from companion.offline.campaign.run import open_executor
+from companion.offline.campaign.run import fly_tasks
 from companion.offline.campaign.stats import clopper_pearson, collision_bound
 
 logger = logging.getLogger(__name__)
@@ -299,23 +298,11 @@ def run_fleet_campaign(drones: int, episodes: Sequence[int], modes: Sequence[str
         bar.update(run)
 
     try:
-        with open_executor(workers, scheduler) as (executor, n_workers):
-            if executor is None:
-                for task in todo:
-                    finished(run_fleet_episode(task))
-            else:
-                futures: dict[Future, FleetTask] = {executor.submit(run_fleet_episode, t): t for t in todo}
-                try:
-                    for fut in as_completed(futures):
-                        finished(fut.result())
-                except KeyboardInterrupt:
-                    for fut in futures:
-                        fut.cancel()
-                    raise
+        n_workers, lost = fly_tasks(run_fleet_episode, todo, workers, scheduler, finished)
     finally:
         bar.close()
         if out is not None:
             out.close()
     runs = [done[k] for k in keys if k in done]
     return FleetCampaign(int(drones), int(seed), float(c_min), runs, summarise_fleet(runs, modes, c_min),
-                         time.perf_counter() - t0, n_workers)
+                         time.perf_counter() - t0, n_workers, extra={"lost": lost})

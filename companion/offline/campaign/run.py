@@ -179,6 +179,40 @@ def _stop(futures: dict, take: Callable[[Future], None]) -> None:
         logger.warning("interrupted again: the runs still in flight are not recorded")
 
 
+def fly_tasks(run: Callable, todo: Sequence, workers: int, scheduler: str | None,
+              finished: Callable) -> tuple[int, int]:
+    """``finished(run(task))`` for every task, on :func:`open_executor`'s executor; returns (workers, runs lost).
+
+    ``run`` never raises (it reports errors in its result); a task whose worker died is lost:
+    logged and counted. Ctrl-C cancels the queued tasks and records the ones in flight
+    (:func:`_stop`); local pool workers take it only inside a run (:func:`interruptible`).
+    """
+    lost = 0
+    with open_executor(workers, scheduler) as (executor, n_workers):
+        if executor is None:
+            for task in todo:
+                finished(run(task))
+            return n_workers, 0
+        call = (interruptible, run) if isinstance(executor, ProcessPoolExecutor) else (run,)
+        futures: dict[Future, object] = {executor.submit(*call, task): task for task in todo}
+
+        def take(fut: Future) -> None:
+            nonlocal lost
+            try:
+                finished(fut.result())
+            except Exception as exc:  # the worker died (run itself never raises)
+                lost += 1
+                logger.error("%s lost: %s: %s", futures[fut], type(exc).__name__, exc)
+
+        try:
+            for fut in as_completed(futures):
+                take(fut)
+        except KeyboardInterrupt:
+            _stop(futures, take)
+            raise
+    return n_workers, lost
+
+
 def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], seed: int, *,
                  workers: int | None = None, c_min: float = 0.90, duration_s: float = DEFAULT_DURATION_S,
                  progress: bool | str | None = None, results_path: str | Path | None = None, resume: bool = False,
@@ -225,7 +259,6 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
     mode = "auto" if progress is None or progress is True else ("off" if progress is False else progress)
     bar = Progress(f"campaign {family}", len(keys), len(keys) - len(todo), mode=mode)
     t0 = time.perf_counter()
-    lost = 0
 
     def finished(result: EpisodeResult) -> None:
         if store is not None:
@@ -234,30 +267,7 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
         bar.update(result)
 
     try:
-        with open_executor(workers, scheduler) as (executor, n_workers):
-            if executor is None:
-                for task in todo:
-                    finished(run_episode(task))
-            else:
-                # local pool workers take Ctrl-C only inside a run (_take_interrupts_only_in_runs)
-                call = (interruptible, run_episode) if isinstance(executor, ProcessPoolExecutor) else (run_episode,)
-                futures: dict[Future, EpisodeTask] = {executor.submit(*call, task): task for task in todo}
-
-                def take(fut: Future) -> None:
-                    nonlocal lost
-                    try:
-                        finished(fut.result())
-                    except Exception as exc:  # the worker died (run_episode itself never raises)
-                        task = futures[fut]
-                        lost += 1
-                        logger.error("episode %d method %s lost: %s: %s", task.index, task.method, type(exc).__name__, exc)
-
-                try:
-                    for fut in as_completed(futures):
-                        take(fut)
-                except KeyboardInterrupt:
-                    _stop(futures, take)
-                    raise
+        n_workers, lost = fly_tasks(run_episode, todo, workers, scheduler, finished)
     finally:
         bar.close()
         if store is not None:
