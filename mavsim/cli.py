@@ -89,6 +89,16 @@ def _output_file(text: str) -> Path:
     return path
 
 
+def _vehicles(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 1 <= v <= 16:
+        raise argparse.ArgumentTypeError(f"must be 1 to 16, got {v}")
+    return v
+
+
 _LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
 
 
@@ -155,6 +165,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--signing-key-env", metavar="NAME",
                    help="MAVLink 2 signing: the key (64 hex digits) in environment variable NAME")
     p.add_argument("--lockstep", action="store_true", help="no sockets: run in lockstep, as fast as possible")
+    p.add_argument("--vehicles", type=_vehicles, default=1, metavar="N",
+                   help="N vehicles in one world (2 to 16), vehicle i with system id 1+i on ports shifted by i "
+                        "(API 14580+i -> 14540+i, GCS 18570+i -> 14550, obstacles 14591+i -> 14601+i), its start and goal "
+                        "the scenario's rotated by 360 deg * i / N about their midpoint (mavsim.fleet)")
     p.add_argument("--log-level", type=_log_level, default="WARNING", help=f"logging level: {', '.join(_LOG_LEVELS)} (default WARNING)")
     return p
 
@@ -201,6 +215,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mavsim: error: {exc}", file=sys.stderr)
         return 2
     duration = None if args.forever else (args.duration or scenario.duration_s)
+    if args.vehicles > 1:
+        return _run_fleet(args, scenario, signing_key, duration)
     if args.lockstep:
         if signing_key is not None:
             print("mavsim: error: signing is for the UDP links; --lockstep has none", file=sys.stderr)
@@ -256,6 +272,45 @@ def main(argv: list[str] | None = None) -> int:
     if args.truth_trace:
         with open(args.truth_trace, "w", encoding="utf-8") as trace:
             trace.writelines(json.dumps(row) + "\n" for row in sim.trace_rows())
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    return 0
+
+
+def _run_fleet(args: argparse.Namespace, scenario, signing_key: bytes | None, duration: float | None) -> int:
+    """``--vehicles N``: N vehicles over UDP (:class:`mavsim.fleet.FleetServer`)."""
+    from mavsim.fleet import FleetServer, rotated_scenarios
+
+    for flag, used in (("--lockstep", args.lockstep), ("--serial", args.serial), ("--tlog", args.tlog)):
+        if used:
+            print(f"mavsim: error: {flag} is not available with --vehicles", file=sys.stderr)
+            return 2
+    try:
+        fleet = FleetServer(
+            rotated_scenarios(scenario, args.vehicles), seed=args.seed, api_port=args.api_port,
+            api_local_port=args.api_local_port, gcs_port=None if args.no_gcs else args.gcs_port,
+            gcs_local_port=None if args.no_gcs else args.gcs_local_port, obstacle_port=args.obstacle_port,
+            obstacle_local_port=args.obstacle_local_port, bind=args.bind, target_host=args.target_host, speed=args.speed,
+            signing=None if signing_key is None else (signing_key, time.time()), obstacles_start=args.obstacles_start,
+            personality=args.autopilot)
+    except SimulationError as exc:   # a port in use, the autopilot's start mode
+        print(f"mavsim: error: {exc}", file=sys.stderr)
+        return 2
+    for i, ports in enumerate(fleet.local_ports):
+        print(f"mavsim: vehicle {i + 1} (system {i + 1}) of scenario {scenario.name!r}: API {args.bind}:{ports['api']} -> "
+              f"{args.target_host}:{args.api_port + i}"
+              + (f", GCS {args.bind}:{ports['gcs']} -> {args.target_host}:{args.gcs_port}" if "gcs" in ports else "")
+              + (f", obstacles {args.bind}:{ports[OBSTACLE_LINK]} -> {args.target_host}:{args.obstacle_port + i}"
+                 if OBSTACLE_LINK in ports else ""), file=sys.stderr, flush=True)
+    with fleet, _stop_on_signals(fleet) as interrupted:
+        fleet.run(duration)
+    if interrupted:
+        print(f"mavsim: stopped by {interrupted[0]}", file=sys.stderr)
+    summary = fleet.summary()
+    if args.truth_trace:
+        with open(args.truth_trace, "w", encoding="utf-8") as trace:
+            for i, sim in enumerate(fleet.sims):
+                trace.writelines(json.dumps({"vehicle": i + 1, **row}) + "\n" for row in sim.trace_rows())
     if args.json:
         print(json.dumps(summary, indent=2))
     return 0

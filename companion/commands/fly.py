@@ -60,6 +60,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="receive-only obstacle link (pymavlink connection string, e.g. udpin:0.0.0.0:14601); repeatable; "
         "added to the scenario's [traffic] obstacle_links",
     )
+    p.add_argument(
+        "--fleet", action="append", type=connection_string, default=[], metavar="URL",
+        help="a link to the other drones of a fleet (e.g. udpin:0.0.0.0:15001 to hear them, udpout:10.0.0.2:15001 to "
+        "tell one); repeatable: this drone's state and plan go out on every link that can send to all it hears, "
+        "the others' come in on all; [fleet] says how they are used (docs/FLEET.md). Never the autopilot's link",
+    )
     p.add_argument("--scenario", type=scenario_file,
                    help="scenario TOML (mission, planner, estimator, map) or a shipped scenario's name; required unless --identify")
     p.add_argument("--goal", type=goal_spec, default=None, metavar="FRAME:A,B,C",
@@ -125,12 +131,15 @@ def run(args: argparse.Namespace) -> int:
         return fly_identification(args)
     if not args.scenario:
         raise ConfigError("--scenario FILE is required (unless --identify)")
+    if args.connect in args.fleet:
+        raise ConfigError(f"--fleet {args.connect}: that is the autopilot's link (--connect); a fleet's announcements "
+                          "never go there (PX4 fuses any ODOMETRY it hears as its own vision)")
     # imported here, not with the parser: numpy, scipy, filterpy, osqp, numba and pymavlink
     from companion.core import jit
     from companion.loop.app import Companion
     from companion.realtime.stream import PlanWorker, run_realtime
     from companion.realtime.run_end import RunEnd, RunEndConfig
-    from companion.loop.intake.traffic_config import obstacle_link_name
+    from companion.loop.intake.traffic_config import FLEET_LINK, obstacle_link_name
     from companion.mavlink import messages
     from companion.mavlink.link import open_link
     from companion.mavlink.signing import SigningKeyError, load_signing_key
@@ -161,9 +170,15 @@ def run(args: argparse.Namespace) -> int:
         resources.callback(worker.close)
         if not worker.wait_ready(_PLANNER_START_S):
             raise CompanionError(f"the planning process did not start within {_PLANNER_START_S:.0f} s")
-        companion = Companion(scenario, offboard=offboard, planning=worker, **goal_keywords(args, scenario))
+        companion = Companion(scenario, offboard=offboard, planning=worker, fleet=bool(args.fleet),
+                              **goal_keywords(args, scenario))
         run_end = RunEnd(RunEndConfig(duration_s=args.duration, hand_back_timeout_s=args.hand_back_timeout,
                                       linger_s=args.linger))
+        # the fleet's links: the other drones' announcements in (tlogged as traffic), ours out
+        fleet_links = []
+        for url in args.fleet:
+            fleet_links.append(open_link(url, clock=microsecond_clock, signing_key=signing_key, name=FLEET_LINK))
+            resources.callback(fleet_links[-1].close)
         # receive-only obstacle links: their traffic goes into the same tlog, written by the stream
         obstacle_links = []
         for i, url in enumerate((*scenario.traffic.obstacle_links, *args.obstacles)):
@@ -180,7 +195,8 @@ def run(args: argparse.Namespace) -> int:
         started = microsecond_clock()
         with _stop_on_signals(run_end):
             stats = run_realtime(companion, link, stop=_saying_what_it_waits_for(run_end, args.connect, started),
-                                 clock=microsecond_clock, tlog=tlog, obstacle_links=obstacle_links, after_tick=view)
+                                 clock=microsecond_clock, tlog=tlog, obstacle_links=obstacle_links, after_tick=view,
+                                 fleet_links=fleet_links)
     outcome = run_end.outcome(companion)
     if companion.goal_error is not None:
         print(f"companion fly: {companion.goal_error}", file=sys.stderr)

@@ -172,6 +172,20 @@ class Link(abc.ABC):
         """The companion's own (system id, component id)."""
         return (self.source_system, self.source_component)
 
+    def set_source(self, system: int, component: int) -> None:
+        """Send as (``system``, ``component``) from now on (the fleet link speaks for the vehicle,
+        whose system id is known only once its HEARTBEAT is heard); signing, if on, is kept."""
+        if not (1 <= int(system) <= 255 and 0 <= int(component) <= 255):
+            raise LinkError(f"MAVLink source ids out of range: system {system}, component {component}")
+        self.source_system, self.source_component = int(system), int(component)
+        self._mav.srcSystem, self._mav.srcComponent = self.source_system, self.source_component
+
+    @property
+    def listens_only(self) -> bool:
+        """Whether the link cannot send to everyone it hears (a ``udpin`` server answers one peer):
+        a fleet link of this kind is for listening; the announcements go out on the others."""
+        return False
+
     def _setup_signing(self, key: bytes, link_id: int, accept_unsigned: bool) -> None:
         if len(key) != 32:
             raise LinkError(f"MAVLink 2 signing key must be 32 bytes, got {len(key)}")
@@ -419,6 +433,10 @@ class MavutilLink(Link):
         self._server = url.startswith(("udpin:", "udp:")) and getattr(self._conn, "udp_server", False)
         self._address_of: dict[tuple[int, int], tuple] = {}
         logger.info("opened MAVLink connection %s as system %d component %d", url, *self.key)
+
+    @property
+    def listens_only(self) -> bool:
+        return self._server
 
     def destination(self) -> tuple | None:
         """Where a udpin link sends: the peer's last address; None (nothing is sent, it is

@@ -31,18 +31,16 @@ from companion.core import jit
 from companion.loop.app import Companion
 from companion.loop.config import read_scenario_toml
 from companion.loop.driver import Driver
-from companion.loop.peer_intents import system_of
+from companion.loop.intake.traffic_config import FLEET_LINK
 from companion.mavlink.link import MemoryLink
 from companion.offline.harness import LOCKSTEP_EPOCH_S, RunResult, ScenarioSource, StepPort, _parse
-from companion.offline.report import run_report
+from companion.offline.report import min_peer_contour, run_report
 from mavsim.lockstep import LockstepSimulator
 
 __all__ = ["FleetResult", "run_fleet_lockstep", "FLEET_COMPONENT", "FLEET_LINK", "PAIR_RANGE_M"]
 
 #: The component id a companion announces its vehicle under (MAV_COMP_ID_ONBOARD_COMPUTER).
 FLEET_COMPONENT = 191
-#: The fleet link's name on each companion.
-FLEET_LINK = "fleet"
 #: Pairs of vehicles at most this far apart (m) count in the per-step collision frequency (the sensing range).
 PAIR_RANGE_M = 10.0
 
@@ -79,7 +77,7 @@ class FleetResult:
         drone_collided = [bool(p.get("collided")) for p in per]
         pair_collided = [c < 0.0 for c in self.pair_min_clearance_m.values()]
         times = [p.get("time_to_goal_s") for p in per]
-        peer_contour = [_min_peer_contour(d.companion) for d in self.drones]
+        peer_contour = [min_peer_contour(d.companion) for d in self.drones]
         peer_contour = [c for c in peer_contour if c is not None]
         return {
             "drones": len(self.drones),
@@ -106,18 +104,6 @@ class FleetResult:
 def _deadlocks(companion: Companion) -> int:
     row = companion.builder.right_of_way
     return 0 if row is None else row.watch.deadlocks
-
-
-def _min_peer_contour(companion: Companion) -> float | None:
-    """The smallest realised contour of touch between the drone's and a peer's estimate over the run
-    (a peer: a track keyed by a MAVLink system on the fleet link)."""
-    worst = None
-    for rec in companion.records:
-        contours = getattr(rec, "realised_contour", None) or {}
-        for key, value in contours.items():
-            if isinstance(key, tuple) and len(key) == 3 and key[2] == FLEET_LINK and system_of(key) is not None:
-                worst = value if worst is None else min(worst, value)
-    return worst
 
 
 def _closest_approach(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> float:

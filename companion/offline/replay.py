@@ -104,6 +104,7 @@ from companion.loop.config import load_scenario
 from companion.mavlink.tlog import read_tlog
 from companion.offline.harness import LOCKSTEP_EPOCH_S
 from companion.loop.intake.obstacles import replay_link
+from companion.loop.intake.traffic_config import FLEET_LINK
 from companion.realtime.tlog_marks import (HAND_BACK, HAND_BACK_REASONS, LEGACY_PLAN_ARRIVED, LEGACY_PLAN_LOST, PLAN_IN,
                                        PLAN_LOST, RX_LINK, SIGNATURES_REJECTED, TICK, link_name, mark_of)
 from companion.loop.intake.traffic_config import AUTOPILOT_LINK
@@ -374,8 +375,12 @@ def replay(
                      "(NAMED_VALUE_FLOAT plan_seq: a log from before the plan marks; real-time planning)")
     elif timeline.realtime_plans:
         notes.append("plans applied at the ticks the recording marked their arrival (real-time planning)")
+    keywords = dict(companion_keywords or {})
+    if any(getattr(rec, "link", None) == FLEET_LINK for _, rec in parsed.stream):
+        keywords.setdefault("fleet", True)   # flown in a fleet: the peers' intents it heard are used again
+        notes.append("a fleet's announcements heard on the fleet link are used as they were ([fleet])")
     companion = Companion(scenario, offboard=offboard, sequencer=AssumeEngaged() if assume_engaged else None,
-                          planning=schedule, **(companion_keywords or {}))
+                          planning=schedule, **keywords)
     if assume_engaged:
         notes.append("offboard sequence assumed engaged from the first autopilot HEARTBEAT (what-if)")
 

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from companion.loop.app import Companion
+from companion.loop.intake.traffic_config import FLEET_LINK
 from companion.loop.records import describe_tracking, status_counts
 
 #: What makes an event an alert: the companion braked (stale estimate, no valid plan, a plan
@@ -71,8 +72,20 @@ def companion_report(companion: Companion) -> dict:
     if getattr(companion, "peers", None) is not None:   # in a fleet: intents heard and used, rules of the road
         row = companion.builder.right_of_way
         report["fleet"] = {"coordination": companion.scenario.fleet.coordination, **companion.peers.summary(),
+                           "min_peer_realised_contour": min_peer_contour(companion),
                            "sent": dict(companion.announcer.sent), **(row.summary() if row is not None else {})}
     return report
+
+
+def min_peer_contour(companion: Companion) -> float | None:
+    """The smallest realised contour of touch between the drone's estimate and a peer's (a track
+    on the fleet link, keyed by its MAVLink system) over the run's replans; None: no peer heard."""
+    worst = None
+    for rec in companion.records:
+        for key, value in (rec.realised_contour or {}).items():
+            if isinstance(key, tuple) and len(key) == 3 and key[2] == FLEET_LINK and isinstance(key[0], int):
+                worst = value if worst is None else min(worst, value)
+    return worst
 
 
 def truth_report(truth: dict) -> dict:

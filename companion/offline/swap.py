@@ -108,24 +108,24 @@ def swap_scenarios(n: int, *, radius_m: float = 6.0, altitude: float = -5.0, tra
 
 def rotated_fleet(data: dict, n: int) -> list[dict]:
     """N copies of one drone's scenario (parsed TOML), drone i's start and goal rotated by
-    ``2 pi i / N`` about the vertical through the midpoint of the scenario's start and goal.
+    ``2 pi i / N`` about the vertical through the midpoint of the scenario's start and goal
+    (:func:`mavsim.fleet.rotated`, as ``mavsim --vehicles N`` places its vehicles).
 
     With the start and goal on opposite sides of a circle (``configs/swap.toml``) this is the
     swap; the world (obstacles, walls) is the same for all. Drone i is named ``NAME-i+1``.
     """
     if not 1 <= int(n) <= 16:
         raise ValueError(f"a fleet of 1 to 16 drones, got {n}")
-    start = np.asarray(data.get("vehicle", {}).get("start_ned_m", [0.0, 0.0, 0.0]), dtype=float)
-    goal = np.asarray(data["mission"]["goal_ned_m"], dtype=float)
-    centre = 0.5 * (start + goal)
+    from mavsim.fleet import rotated   # the same rotation as mavsim --vehicles N
+
+    start0 = data.get("vehicle", {}).get("start_ned_m", [0.0, 0.0, 0.0])
     out = []
     for i in range(int(n)):
-        a = 2.0 * math.pi * i / n
-        rot = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+        start, goal = rotated(start0, data["mission"]["goal_ned_m"], i, int(n))
         d = copy.deepcopy(data)
         name = d.get("scenario", {}).get("name", "fleet")
         d["scenario"] = {**d.get("scenario", {}), "name": f"{name}-{i + 1}"}
-        d["vehicle"] = {**d.get("vehicle", {}), "start_ned_m": [round(float(x), 6) for x in centre + rot @ (start - centre)]}
-        d["mission"] = {**d["mission"], "goal_ned_m": [round(float(x), 6) for x in centre + rot @ (goal - centre)]}
+        d["vehicle"] = {**d.get("vehicle", {}), "start_ned_m": [round(float(x), 6) for x in start]}
+        d["mission"] = {**d["mission"], "goal_ned_m": [round(float(x), 6) for x in goal]}
         out.append(d)
     return out

@@ -51,6 +51,7 @@ from companion.loop.planning import PlanResult
 from companion.loop.request_builder import ReplanJob
 from companion.realtime.tlog_marks import TlogRecorder
 from companion.loop.driver import Driver
+from companion.errors import LinkError
 from companion.mavlink.link import Link
 from companion.mavlink.tlog import TlogWriter
 
@@ -279,6 +280,38 @@ class AutopilotPort:
         return link.send(msg, t_s=t_s)
 
 
+class FleetPort:
+    """The real-time driver's fleet :class:`~companion.loop.driver.Port`: every fleet link that can
+    send to all it hears (``udpout``, broadcast, serial; a ``udpin`` link only listens), under the
+    vehicle's system id and component 191 (onboard computer) once the vehicle is known; before
+    that nothing is announced. A failed send is counted, never raised into the stream."""
+
+    COMPONENT = 191
+
+    def __init__(self, links: Sequence[Link], companion: Companion) -> None:
+        self.links, self.companion = tuple(links), companion
+        self.sent = 0
+        self.failed = 0
+
+    def send(self, msg, t_s: float) -> bytes | None:
+        autopilot = self.companion.autopilot
+        if autopilot is None:
+            return None
+        packet = None
+        for link in self.links:
+            if link.key != (autopilot[0], self.COMPONENT):
+                link.set_source(autopilot[0], self.COMPONENT)
+            if link.listens_only:
+                continue
+            try:
+                packet = link.send(msg, t_s=t_s)
+                self.sent += 1
+            except LinkError as exc:
+                self.failed += 1
+                logger.debug("fleet link %r: %s", link, exc)
+        return packet
+
+
 def _signatures_rejected(links: Sequence[Link]) -> int:
     """Packets the links dropped for a bad or missing signature (a stand-in link without counters: 0)."""
     return sum(getattr(getattr(link, "stats", None), "signature_rejected", 0) for link in links)
@@ -359,6 +392,7 @@ def run_realtime(
     obstacle_links: Sequence[Link] = (),
     obstacle_share: float = OBSTACLE_SHARE,
     after_tick: Callable[[Companion, float, list], None] | None = None,
+    fleet_links: Sequence[Link] = (),
 ) -> StreamStats:
     """Run the companion against a live link until ``duration_s`` passes or ``stop(companion)``.
 
@@ -393,6 +427,9 @@ def run_realtime(
         obstacle traffic (measured on ``clock``).
     after_tick : ``after_tick(companion, t_s, outbox)`` after each tick's packets are sent (a
         view, :mod:`companion.view`; it must not block: it counts in ``tick_max_ms``).
+    fleet_links : the fleet's links (``companion fly --fleet``, a companion built with
+        ``fleet=True``): what arrives on them waits in the obstacle backlog like traffic; each
+        tick's :attr:`Companion.fleet_outbox` goes out on them (:class:`FleetPort`).
 
     The tlog also gets the marks a replay needs (:mod:`companion.realtime.tlog_marks`): each
     tick's time, the links' signature-rejection count, the plans each tick collected, and
@@ -407,8 +444,10 @@ def run_realtime(
     others = ObstacleBacklog(_MAX_BACKLOG)
 
     driver = Driver(companion, AutopilotPort(link, companion),
-                    TlogRecorder(tlog, link.key) if tlog is not None else None)
-    links = (link, *obstacle_links)
+                    TlogRecorder(tlog, link.key) if tlog is not None else None,
+                    fleet_port=FleetPort(fleet_links, companion) if fleet_links else None)
+    links = (link, *obstacle_links, *fleet_links)
+    receive_only = (*obstacle_links, *fleet_links)
 
     start, cpu_start = clock(), time.process_time()
     next_tick = start
@@ -426,7 +465,7 @@ def run_realtime(
                     driver.receive(rx)
                 else:
                     others.put(rx)
-            for obstacle_link in obstacle_links:  # obstacle traffic only: never ahead of the autopilot
+            for obstacle_link in receive_only:  # traffic and the fleet: never ahead of the autopilot
                 for rx in obstacle_link.poll():
                     others.put(rx)
             now = clock()

@@ -72,7 +72,7 @@ import logging
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.loop.plan_cycle import PlanArrival
-from companion.loop.intake.traffic_config import AUTOPILOT_LINK, OBSTACLE_LINK_PREFIX, obstacle_link_name
+from companion.loop.intake.traffic_config import AUTOPILOT_LINK, FLEET_LINK, OBSTACLE_LINK_PREFIX, obstacle_link_name
 from companion.mavlink.link import Received
 from companion.mavlink.tlog import TlogWriter
 
@@ -94,10 +94,17 @@ LEGACY_PLAN_ARRIVED = "plan_seq"
 LEGACY_PLAN_LOST = "plan_lost"
 
 
+#: The :data:`RX_LINK` value of the fleet link.
+FLEET_LINK_INDEX = 255
+
+
 def link_index(link: str) -> int:
-    """The 1-based index of an obstacle link from its name (``obstacles2`` -> 2); 0 for the autopilot link."""
+    """The 1-based index of an obstacle link from its name (``obstacles2`` -> 2); 0 for the autopilot
+    link, :data:`FLEET_LINK_INDEX` for the fleet link."""
     if link == AUTOPILOT_LINK:
         return 0
+    if link == FLEET_LINK:
+        return FLEET_LINK_INDEX
     if link.startswith(OBSTACLE_LINK_PREFIX) and link[len(OBSTACLE_LINK_PREFIX):].isdigit():
         return int(link[len(OBSTACLE_LINK_PREFIX):])
     raise ValueError(f"not a link name the companion gives: {link!r}")
@@ -105,6 +112,8 @@ def link_index(link: str) -> int:
 
 def link_name(index: int) -> str:
     """The link name of an :data:`RX_LINK` mark's value (inverse of :func:`link_index`)."""
+    if index == FLEET_LINK_INDEX:
+        return FLEET_LINK
     return AUTOPILOT_LINK if index <= 0 else obstacle_link_name(int(index) - 1)
 
 

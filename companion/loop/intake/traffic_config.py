@@ -48,6 +48,8 @@ from companion.mavlink.traffic import TRAFFIC_KINDS
 
 AUTOPILOT_LINK = "autopilot"
 OBSTACLE_LINK_PREFIX = "obstacles"
+#: The fleet link's name (``companion fly --fleet``): the other drones' announcements, and ours.
+FLEET_LINK = "fleet"
 
 
 def obstacle_link_name(index: int) -> str:

@@ -1,0 +1,112 @@
+"""Two drones swap in real time: ``mavsim --vehicles 2`` and two ``companion fly --fleet`` over loopback UDP.
+
+mavsim serves vehicle 1 (system 1) and vehicle 2 (system 2) on ports shifted by one; each
+companion flies its own vehicle, hears the traffic on its own obstacle port and the other
+drone only on its fleet links (a ``udpin`` to hear, a ``udpout`` to the other's). Both must
+reach their goals with no collision in mavsim's truth (any pair, and each against the two
+crossing aircraft), the realised contour between the drones' estimates never below
+``c_min``, intents heard and used, and the 20 Hz stream without a gap over 150 ms. Every
+wait is bounded; every process is ended.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from companion.loop.config import read_scenario_toml
+from companion.offline.campaign.toml_writer import to_toml
+from companion.offline.swap import rotated_fleet
+
+pytestmark = [pytest.mark.realtime, pytest.mark.quarantine(reason="new: fleets in real time; not yet 20 of 20 in make flake-check")]
+
+ROOT = Path(__file__).resolve().parents[2]
+SWAP = ROOT / "configs" / "swap.toml"
+RUN_S = 40.0
+TIMEOUT_S = 90.0
+
+
+def _free_run(n: int) -> int:
+    """A loopback UDP port p with p .. p+n-1 all free (mavsim shifts a vehicle's ports by its index)."""
+    for _ in range(50):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(("127.0.0.1", 0))
+            base = int(s.getsockname()[1])
+        if base + n > 65535:
+            continue
+        socks = []
+        try:
+            for k in range(n):
+                sk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                socks.append(sk)
+                sk.bind(("127.0.0.1", base + k))
+            return base
+        except OSError:
+            continue
+        finally:
+            for sk in socks:
+                sk.close()
+    raise RuntimeError("no run of free UDP ports")
+
+
+def _end(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+
+
+def test_that_two_drones_swap_in_real_time_knowing_each_other_only_by_their_announcements(tmp_path):
+    scenarios = rotated_fleet(read_scenario_toml(SWAP), 2)
+    files = []
+    for i, data in enumerate(scenarios):
+        path = tmp_path / f"drone{i + 1}.toml"
+        path.write_text(to_toml(data))
+        files.append(path)
+    api, api_local, obstacle, obstacle_local, fleet = (_free_run(2) for _ in range(5))
+    sim = subprocess.Popen(
+        [sys.executable, "-m", "mavsim.cli", "--scenario", str(SWAP), "--vehicles", "2", "--no-gcs",
+         "--api-port", str(api), "--api-local-port", str(api_local), "--obstacle-port", str(obstacle),
+         "--obstacle-local-port", str(obstacle_local), "--duration", str(RUN_S), "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    flies = []
+    try:
+        for i in range(2):
+            other = 1 - i
+            flies.append(subprocess.Popen(
+                [sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{api + i}",
+                 "--scenario", str(files[i]), "--obstacles", f"udpin:127.0.0.1:{obstacle + i}",
+                 "--fleet", f"udpin:127.0.0.1:{fleet + i}", "--fleet", f"udpout:127.0.0.1:{fleet + other}",
+                 "--duration", str(RUN_S - 5.0), "--exit-after-goal", "1.0", "--json", "--tlog", str(tmp_path / f"{i}.tlog")],
+                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT))
+        outs = []
+        for proc in flies:
+            out, err = proc.communicate(timeout=TIMEOUT_S)
+            outs.append((proc.returncode, out, err))
+        sim_out, sim_err = sim.communicate(timeout=TIMEOUT_S)
+    finally:
+        for proc in (*flies, sim):
+            _end(proc)
+    reports = []
+    for code, out, err in outs:
+        assert code == 0, err[-2000:]
+        reports.append(json.loads(out))
+    truth = json.loads(sim_out)
+    assert truth["vehicles"] == 2 and truth["goal_reached"] and not truth["collided"], (truth["pairs"], sim_err[-1000:])
+    assert truth["min_pair_clearance_m"] > 0.0
+    for r in reports:
+        fleet = r["fleet"]
+        assert fleet["coordination"] == "distributed"
+        assert fleet["intents_received"] > 20 and fleet.get("intents_used", 0) > 0, fleet
+        assert fleet["sent"]["states"] > 50 and fleet["sent"]["intents"] > 5
+        assert fleet["min_peer_realised_contour"] >= r["c_min"], fleet
+        assert r["setpoint_gap_max_ms"] <= 150.0, r["setpoint_gap_max_detail"]
