@@ -22,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -116,7 +116,9 @@ def _closest_approach(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.nda
 
 def run_fleet_lockstep(scenarios: Sequence[ScenarioSource], *, seed: int = 0, duration_s: float | None = None,
                        coordination: str | None = None, stop_after_goal_s: float | None = 2.0,
-                       autopilot: str | None = None) -> FleetResult:
+                       autopilot: str | None = None, signing_key: bytes | None = None,
+                       silent_after_s: dict[int, float] | None = None,
+                       inject: Callable[[float], list[bytes]] | None = None) -> FleetResult:
     """Fly N drones together in lockstep (see the module docstring).
 
     Parameters
@@ -128,6 +130,12 @@ def run_fleet_lockstep(scenarios: Sequence[ScenarioSource], *, seed: int = 0, du
     coordination : replaces every drone's ``[fleet] coordination`` (None: each scenario's own).
     stop_after_goal_s : end the run this long after the truth says every drone reached its goal.
     autopilot : the autopilot mavsim imitates (None: PX4).
+    signing_key : every fleet link signs with this 32-byte key and drops unsigned or badly signed
+        packets (counted in ``extra["signature_rejected"]``, per drone).
+    silent_after_s : {drone index: simulated s}: that drone's announcements stop reaching the others
+        then (its companion keeps flying and sending; a radio that died).
+    inject : ``inject(t_s) -> [packet, ...]``: packets put on the fleet bus at each tick, delivered to
+        every drone (a forger on the fleet's radio).
     """
     if not 1 <= len(scenarios) <= 100:
         raise ValueError(f"a fleet has 1 to 100 drones, got {len(scenarios)}")
@@ -144,7 +152,8 @@ def run_fleet_lockstep(scenarios: Sequence[ScenarioSource], *, seed: int = 0, du
         link = MemoryLink(clock=clock, tlog_offset_s=LOCKSTEP_EPOCH_S)
         obstacle_link = (MemoryLink(clock=clock, name="obstacles1", receive_only=True, tlog_offset_s=LOCKSTEP_EPOCH_S)
                          if sim.has_obstacle_link else None)
-        fleet_link = MemoryLink(clock=clock, name=FLEET_LINK, source_system=1 + i, source_component=FLEET_COMPONENT)
+        fleet_link = MemoryLink(clock=clock, name=FLEET_LINK, source_system=1 + i, source_component=FLEET_COMPONENT,
+                                signing_key=signing_key)
         configs.append(config)
         sims.append(sim)
         companions.append(companion)
@@ -183,14 +192,17 @@ def run_fleet_lockstep(scenarios: Sequence[ScenarioSource], *, seed: int = 0, du
                 for sender, packet in bus:
                     if sender != i:
                         fleet_links[i].deliver(sim.time_s, packet)
-                        carried += 1
+                        carried += sender >= 0
                 for rx in fleet_links[i].poll():
                     driver.receive(rx)
                 driver.tick(sim.time_s)
                 for packet in link.take_outbound():
                     sim.write(packet)
                 sent.extend((i, p) for p in fleet_links[i].take_outbound())
-            bus = sent
+            silent = silent_after_s or {}
+            bus = [(k, p) for k, p in sent if not (k in silent and sims[0].time_s >= silent[k])]
+            if inject is not None:
+                bus.extend((-1, p) for p in inject(sims[0].time_s))
             now = [s.truth.drone_position_ned_m.copy() for s in sims]
             for (i, j) in pairs:
                 d = _closest_approach(positions[i], now[i], positions[j], now[j])
@@ -217,6 +229,7 @@ def run_fleet_lockstep(scenarios: Sequence[ScenarioSource], *, seed: int = 0, du
             fleet_packets=carried,
             pair_ticks=pair_ticks,
             pair_contact_ticks=int(pair_contacts),
+            extra={"signature_rejected": [link.stats.signature_rejected for link in fleet_links]},
         )
     finally:
         for link in (*links, *fleet_links, *(o for o in obstacle_links if o is not None)):

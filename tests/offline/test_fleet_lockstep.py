@@ -4,7 +4,8 @@
 import numpy as np
 import pytest
 
-from companion.offline.fleet_harness import FLEET_LINK, run_fleet_lockstep
+from companion.loop.intake.traffic_config import FLEET_LINK
+from companion.offline.fleet_harness import run_fleet_lockstep
 from companion.offline.swap import swap_scenarios
 
 
@@ -59,3 +60,37 @@ def test_that_without_keeping_right_two_drones_that_reason_alike_dodge_the_same_
     kept = run_fleet_lockstep(swap_scenarios(2, traffic=False), seed=0, coordination="decentralised").summary()
     assert danced["min_peer_realised_contour"] < 0.9 <= kept["min_peer_realised_contour"]
     assert danced["time_to_all_goals_s"] > 1.5 * kept["time_to_all_goals_s"]
+
+
+def test_that_a_peer_gone_silent_is_flown_around_at_constant_velocity_then_forgotten_once():
+    # drone 2's radio dies 3 s in, before they meet; it still hears drone 1 and gives way
+    result = run_fleet_lockstep(swap_scenarios(2, traffic=False), seed=0, silent_after_s={1: 3.0})
+    s = result.summary()
+    assert not s["collided"] and s["goal_reached"], s
+    one = result.drones[0].companion
+    assert one.peers.counts["stale"] > 0                       # its last intent went stale: constant velocity
+    dropped = [text for _, text in one.state.events if "sys 2:191" in text and "dropped" in text]
+    assert len(dropped) == 1, one.state.events                  # forgotten, and said so once
+    assert (2, 191, FLEET_LINK) not in one.tracker.keys()
+
+
+def _forger(t_s):
+    """Unsigned ODOMETRY claiming to be drone 2, standing 2 m ahead of drone 1 on its way (drone 1 starts at (6, 0))."""
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    from companion.mavlink import fleet
+
+    msg = fleet.encode_state(int(t_s * 1e6), [3.0, 0.0, -5.0], [0.0, 0.0, 0.0], 0.01 * np.eye(3), None)
+    return [bytes(msg.pack(mavlink2.MAVLink(None, 2, 191)))] if t_s >= 2.0 else []
+
+
+def test_that_a_forged_announcement_changes_no_plan_when_the_fleet_signs():
+    key = bytes(range(32))
+    plans = lambda r: [rec.plan_positions.tobytes() for rec in r.drones[0].companion.records]  # noqa: E731
+    clean = run_fleet_lockstep(swap_scenarios(2, traffic=False), seed=0, duration_s=8.0, signing_key=key)
+    forged = run_fleet_lockstep(swap_scenarios(2, traffic=False), seed=0, duration_s=8.0, signing_key=key, inject=_forger)
+    assert plans(forged) == plans(clean)                          # not one plan changed
+    assert forged.extra["signature_rejected"][0] > 100 and clean.extra["signature_rejected"] == [0, 0]
+    unsigned = run_fleet_lockstep(swap_scenarios(2, traffic=False), seed=0, duration_s=8.0, inject=_forger)
+    plain = run_fleet_lockstep(swap_scenarios(2, traffic=False), seed=0, duration_s=8.0)
+    assert plans(unsigned) != plans(plain)                        # unsigned, the same forgery steers drone 1
