@@ -46,7 +46,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--drones", type=integer_at_least(1), default=1, metavar="N",
                    help="fly N drones (2 to 16), each with its own simulated autopilot and companion, the "
                         "scenario's start and goal rotated about their midpoint for each (the swap: "
-                        "`demo swap --drones 4`); lockstep only (docs/FLEET.md)")
+                        "`demo swap --drones 4`); with --realtime mavsim --vehicles N and N companion fly processes "
+                        "over loopback UDP, each with its fleet links (docs/FLEET.md)")
     p.add_argument("--coordination", default=None, choices=COORDINATION_MODES,
                    help="with --drones: how the drones use each other's announced plans (default: the scenario's [fleet])")
     add_view_arguments(p)
@@ -80,7 +81,9 @@ def run(args: argparse.Namespace) -> int:
     if args.crowd > MAX_SYSTEMS:
         raise ConfigError(f"--crowd: at most {MAX_SYSTEMS} systems, got {args.crowd}")
     if args.drones > 1 or args.coordination:
-        return _run_fleet(scenario, args, overrides, out)
+        from companion.commands._demo_fleet import run_fleet
+
+        return run_fleet(scenario, args, overrides, out)
     summary = _run_realtime(scenario, args, overrides, out) if args.realtime else _run_lockstep(scenario, args, overrides, out)
     if args.json:
         print(json.dumps(summary, indent=2, default=str))
@@ -93,64 +96,6 @@ def run(args: argparse.Namespace) -> int:
         if out is not None:
             print(f"outputs in {out}/")
     return _realtime_failure(summary)
-
-
-def _run_fleet(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None) -> int:
-    """``--drones N``: the fleet in lockstep (:func:`companion.offline.fleet_harness.run_fleet_lockstep`)."""
-    if not 2 <= args.drones <= 16:
-        raise ConfigError(f"--drones: a fleet of 2 to 16 drones, got {args.drones}")
-    for flag, used in (("--realtime", args.realtime), ("--crowd", args.crowd), ("--view", getattr(args, "view", None)),
-                       ("--mcap", getattr(args, "mcap", None))):
-        if used:
-            raise ConfigError(f"{flag} is not available with --drones (fleets fly in lockstep only, for now)")
-    from companion.loop.config import read_scenario_toml
-    from companion.offline.fleet_harness import run_fleet_lockstep
-    from companion.offline.swap import rotated_fleet
-
-    data = read_scenario_toml(scenario)
-    planner = dict(data.get("planner", {}))
-    for key, value in overrides.items():
-        if value is None:
-            planner.pop(key, None)
-        else:
-            planner[key] = value
-    data["planner"] = planner
-    t0 = time.perf_counter()
-    result = run_fleet_lockstep(rotated_fleet(data, args.drones), seed=args.seed, coordination=args.coordination)
-    summary = result.summary()
-    first = result.drones[0].companion.scenario
-    summary["coordination"] = args.coordination or first.fleet.coordination
-    summary["c_min"] = first.planner.c_min
-    summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
-    if out is not None:
-        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
-    if args.json:
-        print(json.dumps(summary, indent=2, default=str))
-    else:
-        print(_format_fleet(summary))
-        if out is not None:
-            print(f"outputs in {out}/")
-    return 0
-
-
-def _format_fleet(s: dict) -> str:
-    """A fleet summary as lines: the fleet, then one line per drone."""
-    lines = [
-        f"drones: {s['drones']} ({s['coordination']})",
-        f"collision: {s['collided']} (drone-drone {s['drone_drone_collisions']}, drone-traffic {s['drone_traffic_collisions']})",
-        f"all goals reached: {s['goal_reached']}, the last at {s['time_to_all_goals_s']} s",
-        f"smallest true clearance between drones [m]: {s['min_pair_clearance_m']:.3f}",
-        f"smallest realised contour between drones: {_fmt4(s['min_peer_realised_contour'])} (c_min {s['c_min']})",
-        f"wall time [s]: {s['wall_time_s']}",
-    ]
-    for i, d in enumerate(s["per_drone"]):
-        lines.append(f"  drone {i + 1}: goal {d['goal_reached']} at {d['time_to_goal_s']} s, collided {d['collided']}, "
-                     f"slack replans {d['replans_with_slack']}, failed plans {d['failed_plans']}")
-    return "\n".join(lines)
-
-
-def _fmt4(value) -> str:
-    return "-" if value is None else f"{value:.4f}"
 
 
 def _say_why_not(scenario: Path) -> None:

@@ -211,6 +211,7 @@ def run(args: argparse.Namespace) -> int:
     if stats is not None:
         report.update(stats.summary())
         report["wall_s"] = round(stats.wall_s, 2)
+        report.update(_resources_used(stats.wall_s))
     report["planner_process"] = {
         "solved": worker.stats.solved, "superseded": worker.stats.superseded, "errors": worker.stats.errors,
         "max_solve_ms": round(worker.stats.max_solve_s * 1e3, 1),
@@ -227,6 +228,17 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(format_report(report), file=sys.stdout)
     return outcome.code
+
+
+def _resources_used(wall_s: float) -> dict:
+    """CPU (this process and its planning process, which has ended) and the largest resident memory of each."""
+    import resource
+
+    me, planner = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu_s = me.ru_utime + me.ru_stime + planner.ru_utime + planner.ru_stime
+    return {"cpu_s": round(cpu_s, 2), "cpu_share": round(cpu_s / wall_s, 3) if wall_s > 0 else None,
+            "max_rss_mb": round(me.ru_maxrss / 1024.0, 1),            # Linux: kibibytes
+            "planner_max_rss_mb": round(planner.ru_maxrss / 1024.0, 1)}
 
 
 #: How often ``fly`` says it is still waiting for an autopilot (s).

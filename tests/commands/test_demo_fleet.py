@@ -24,7 +24,7 @@ def test_that_two_drones_swap_and_the_summary_says_so(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, words", [
     (["--drones", "17"], "2 to 16"),
-    (["--drones", "2", "--realtime"], "lockstep only"),
+    (["--drones", "2", "--realtime", "--crowd", "5"], "not available with --drones"),
     (["--drones", "0"], "--drones"),
 ])
 def test_that_a_fleet_it_cannot_fly_is_one_line_and_exit_2(argv, words, capsys):
