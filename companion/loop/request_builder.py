@@ -98,7 +98,8 @@ FENCE_CORNER_MARGIN_M = 1.0
 class RequestBuilder:
     """Builds :class:`ReplanJob` s for one scenario (mission, map, planner and loop settings).
 
-    Holds no state of its own but its sources': the goal source keeps where the route started.
+    Holds no state of its own but its sources': the goal source keeps where the route started,
+    the fleet's right of way its deadlock watch.
 
     Parameters
     ----------
