@@ -51,6 +51,7 @@ from companion.loop.perception import Perception
 from companion.loop.plan_cycle import PlanArrival, PlanCycle
 from companion.loop.planning import InlinePlanning, PlanningService
 from companion.loop.fleet_announcer import FleetAnnouncer
+from companion.loop.fleet_frame import FleetFrame
 from companion.loop.peer_intents import PeerIntents
 from companion.loop.records import CompanionState, LoopMode, ReplanRecord
 from companion.loop.right_of_way import RightOfWay
@@ -116,11 +117,14 @@ class Companion:
         #: the fleet's intents, and what this drone announces (None: no fleet)
         self.peers = PeerIntents(scenario.fleet, own_system=None) if fleet else None
         self.announcer = FleetAnnouncer(scenario.fleet, scenario.planner.step_s) if fleet else None
+        #: where this vehicle's local frame sits in the fleet's (None: no fleet)
+        self.fleet_frame = FleetFrame(scenario.fleet.origin, self.reference) if fleet else None
         #: this tick's messages for the fleet link (empty without a fleet)
         self.fleet_outbox: Outbox = []
         # obstacle links, traffic reports and GPS_GLOBAL_ORIGIN, onto the same tracks and time base
         self.obstacles = ObstacleIntake(scenario.traffic, self.perception.tracker, self.perception.vehicle_time,
-                                        self.settings.obstacle_radius_m, reference=self.reference, peers=self.peers)
+                                        self.settings.obstacle_radius_m, reference=self.reference, peers=self.peers,
+                                        fleet_frame=self.fleet_frame)
         plan = read_mission_file(scenario.mission.plan_file) if scenario.mission.plan_file is not None else None
         if goal is None and plan is not None:  # a mission file named by the scenario
             goal = MissionGoal(scenario.mission, self.reference, plan, upload=scenario.mission.plan_upload)
@@ -227,7 +231,8 @@ class Companion:
         estimate = self.perception.drone.state
         flying = self.sequencer.state.streaming and self.state.mode is LoopMode.TRACKING
         ex = self.executor
-        return self.announcer.outbox(t_s, estimate, ex.plan if flying else None, ex.plan_t0_v, ex.plan_p0)
+        return self.announcer.outbox(t_s, estimate, ex.plan if flying else None, ex.plan_t0_v, ex.plan_p0,
+                                     self.fleet_frame.offset())
 
     def _tick(self, t_s: float) -> Outbox:
         self.cycle.begin_tick()

@@ -28,6 +28,10 @@ from companion.loop.fleet_config import FleetConfig
 from companion.mavlink import fleet
 
 
+_ZERO = np.zeros(3)
+_ZERO.setflags(write=False)
+
+
 def _usec(t_s: float) -> int:
     return max(0, int(round(t_s * 1e6)))
 
@@ -53,18 +57,25 @@ class FleetAnnouncer:
         #: messages built: ``states``, ``intents``, ``withdrawals``
         self.sent = {"states": 0, "intents": 0, "withdrawals": 0}
 
-    def outbox(self, t_s: float, estimate, plan: Plan | None, plan_t0_v: float, plan_p0: np.ndarray) -> list:
+    def outbox(self, t_s: float, estimate, plan: Plan | None, plan_t0_v: float, plan_p0: np.ndarray,
+               offset: np.ndarray | None = _ZERO) -> list:
         """The messages due at link time ``t_s``.
 
         ``estimate``: the drone filter's state (``t_s`` vehicle time, ``position``, ``velocity``,
         ``position_cov``, ``velocity_cov``) or None before the first; ``plan``: the plan in force
         (None: none flown), starting at vehicle time ``plan_t0_v`` from ``plan_p0`` (NED m).
+        Positions go out in the fleet's frame: local plus ``offset`` (NED m,
+        :class:`~companion.loop.fleet_frame.FleetFrame`; zero by default); None: the frame is not
+        known yet and nothing is announced.
         """
         out: list = []
+        if offset is None:
+            return out
+        offset = np.asarray(offset, dtype=float)
         if estimate is not None and t_s >= self._next_state_t - 1e-6 and _usec(estimate.t_s) != self._last_state_stamp:
             self._next_state_t = t_s + self._state_period
             self._last_state_stamp = _usec(estimate.t_s)
-            out.append(fleet.encode_state(self._last_state_stamp, estimate.position, estimate.velocity,
+            out.append(fleet.encode_state(self._last_state_stamp, estimate.position + offset, estimate.velocity,
                                           estimate.position_cov, getattr(estimate, "velocity_cov", None)))
             self.sent["states"] += 1
         due = t_s - self._last_intent_t >= self.config.intent_resend_s - 1e-6
@@ -77,7 +88,7 @@ class FleetAnnouncer:
         if plan is not self._sent_plan or due:
             intent = intent_from_plan(plan_t0_v, self.step_s, plan_p0, plan.initial_velocity, plan.positions,
                                       plan.velocities, self.config.intent_knot_spacing_s)
-            out.append(fleet.encode_intent(_usec(intent.t0_s), intent.positions, intent.velocities))
+            out.append(fleet.encode_intent(_usec(intent.t0_s), intent.positions + offset, intent.velocities))
             self._withdrawn, self._sent_plan, self._last_intent_t = False, plan, t_s
             self.sent["intents"] += 1
         return out

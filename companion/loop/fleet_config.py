@@ -12,6 +12,7 @@
     deadlock_after_s = 6.0           # s without progress_m toward the goal, a peer near: a deadlock
     deadlock_progress_m = 0.5
     recovery_s = 4.0                 # s of a wider move to the right after a deadlock
+    origin = [47.3977, 8.5456, 488.0]  # the fleet's shared frame (lat, lon deg, alt m AMSL); default: the vehicles' own
 
 Coordination (docs/FLEET.md):
 
@@ -28,6 +29,10 @@ Right of way (:mod:`companion.loop.right_of_way`): with ``keep_right`` a drone t
 peer moves its target to the right of its way, so drones that meet pass left side to left
 side; no progress toward the goal for ``deadlock_after_s`` with a peer near is a deadlock
 (counted), followed by a wider move right for ``recovery_s``.
+
+Frame (:mod:`companion.loop.fleet_frame`): announcements are in the fleet's NED frame about
+``origin``, the same for the whole fleet; without it, in the vehicles' own local frame (one
+simulator's world, or vehicles that share an origin).
 
 ``intent_knot_spacing_s`` must be the same for the whole fleet: the intent's message has no
 per-point time (:mod:`companion.mavlink.fleet`).
@@ -58,6 +63,7 @@ class FleetConfig:
     deadlock_after_s: float = 6.0
     deadlock_progress_m: float = 0.5
     recovery_s: float = 4.0
+    origin: tuple | None = None
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -73,6 +79,12 @@ class FleetConfig:
         set_("deadlock_after_s", check.number("deadlock_after_s", self.deadlock_after_s, positive=True, hi=600.0))
         set_("deadlock_progress_m", check.number("deadlock_progress_m", self.deadlock_progress_m, lo=0.0, hi=100.0))
         set_("recovery_s", check.number("recovery_s", self.recovery_s, lo=0.0, hi=600.0))
+        if self.origin is not None:
+            if not isinstance(self.origin, (list, tuple)) or len(self.origin) != 3:
+                raise ConfigError(f"origin = {self.origin!r} must be [latitude deg, longitude deg, altitude m AMSL]")
+            set_("origin", (check.number("origin latitude", self.origin[0], lo=-90.0, hi=90.0),
+                            check.number("origin longitude", self.origin[1], lo=-180.0, hi=180.0),
+                            check.number("origin altitude", self.origin[2], lo=-1000.0, hi=20000.0)))
         if self.intent_resend_s >= self.intent_stale_s:
             raise ConfigError(f"intent_resend_s = {self.intent_resend_s:g} must be < intent_stale_s = "
                               f"{self.intent_stale_s:g}: a peer would let the intent go stale between sendings")

@@ -111,3 +111,43 @@ def test_that_intents_are_ignored_without_a_fleet_and_forgotten_with_their_track
     it.tracker.prune(100.0 + it.tracker.config.drop_after_s + 1.0)
     it.outbound(210.0, AP)                                              # the track's drop is noticed here
     assert len(peers) == 0
+
+
+def test_that_the_fleet_frame_is_the_vehicles_origin_placed_about_the_fleets():
+    from companion.core.geo import reproject
+    from companion.loop.fleet_frame import FleetFrame
+    from companion.loop.vehicle_reference import VehicleReference
+    from companion.mavlink.traffic import GlobalOrigin
+
+    ref = VehicleReference()
+    assert np.allclose(FleetFrame(None, ref).offset(), 0.0)          # no fleet origin: the vehicles' own frame
+    frame = FleetFrame((47.3977, 8.5456, 488.0), ref)
+    assert frame.offset() is None and ref.origin_request.wanted       # waits for (and asks) the vehicle's origin
+    lat, lon = reproject(30.0, -12.0, 47.3977, 8.5456)                # the vehicle's origin 30 m north, 12 m west
+    ref.on_origin(GlobalOrigin(lat, lon, 490.0))
+    assert np.allclose(frame.offset(), [30.0, -12.0, -2.0], atol=1e-6)
+
+
+def test_that_positions_cross_the_fleet_link_in_the_fleets_frame(monkeypatch):
+    from companion.loop.fleet_frame import FleetFrame
+    from companion.loop.vehicle_reference import VehicleReference
+
+    class Shifted(FleetFrame):
+        def offset(self):
+            return np.array([30.0, -12.0, -2.0])
+
+    frame = Shifted(None, VehicleReference())
+    ann = FleetAnnouncer(FleetConfig(), step_s=0.3)
+    odo, intent = ann.outbox(0.0, _estimate(100.0, x=1.0), _plan(), 100.0, np.array([0.0, 0.0, -5.0]), frame.offset())
+    assert np.allclose([odo.x, odo.y, odo.z], [31.0, -12.0, -7.0]) and np.allclose(intent.pos_x[:2], [30.0, 31.5])
+    assert ann.outbox(1.0, _estimate(101.0), _plan(), 100.0, np.zeros(3), None) == []   # frame unknown: silent
+    peers = PeerIntents(FleetConfig(), own_system=1)
+    it = ObstacleIntake(TrafficConfig(), ObstacleTracker(TrackerConfig()), lambda t: t - 100.0, 0.5, peers=peers,
+                        fleet_frame=frame)
+    it.claims(_rx(fleet.encode_state(_peer_clock(200.0), [31.0, -12.0, -7.0], [1, 0, 0], 0.01 * np.eye(3), None),
+                  200.0, link="fleet"), AP)
+    it.claims(_rx(fleet.encode_intent(_peer_clock(200.0), np.array([[31.0, -12.0, -7.0]]), np.zeros((1, 3))),
+                  200.0, link="fleet"), AP)
+    key = (PEER_SYS, 191, "fleet")
+    assert np.allclose(it.tracker.state(key).position, [1.0, 0.0, -5.0])
+    assert np.allclose(peers.fresh(key, 100.0).positions, [[1.0, 0.0, -5.0]])

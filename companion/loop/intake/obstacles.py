@@ -43,7 +43,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.core.intent import Intent
 from companion.loop.intake.source_clocks import SourceClock
 from companion.loop.peer_intents import PeerIntents
-from companion.loop.intake.traffic_config import AUTOPILOT_LINK, SourcePolicy, TrafficConfig, obstacle_link_name
+from companion.loop.fleet_frame import FleetFrame
+from companion.loop.intake.traffic_config import AUTOPILOT_LINK, FLEET_LINK, SourcePolicy, TrafficConfig, obstacle_link_name
 from companion.loop.vehicle_reference import MessageRequest, VehicleReference
 from companion.mavlink import fleet, messages, traffic
 from companion.mavlink.link import Received
@@ -125,11 +126,14 @@ class ObstacleIntake:
     peers : PeerIntents, optional
         Where the fleet's intents (TRAJECTORY_REPRESENTATION_WAYPOINTS on an obstacle link,
         :mod:`companion.mavlink.fleet`) go, on the vehicle's time base; None: intents are ignored.
+    fleet_frame : FleetFrame, optional
+        The fleet's frame: positions heard on the fleet link (:data:`FLEET_LINK`) are in it and
+        are moved into the local frame (they wait, counted, while it is not known).
     """
 
     def __init__(self, config: TrafficConfig, tracker, vehicle_time: Callable[[float], float | None],
                  default_radius_m: float, reference: VehicleReference | None = None,
-                 peers: PeerIntents | None = None) -> None:
+                 peers: PeerIntents | None = None, fleet_frame: FleetFrame | None = None) -> None:
         self.config = config
         self.tracker = tracker
         self.vehicle_time = vehicle_time
@@ -156,6 +160,7 @@ class ObstacleIntake:
         self._geoid_request = _MessageRequest(MSG_GPS_RAW_INT, _ORIGIN_REQUEST_PERIOD_S, _MAX_GEOID_REQUESTS)
         self._geoid_given_up = False
         self.peers = peers
+        self.fleet_frame = fleet_frame
 
     @property
     def origin(self) -> traffic.GlobalOrigin | None:
@@ -248,6 +253,13 @@ class ObstacleIntake:
         if icao is not None and self._is_duplicate(icao, msg, rx.t_s):
             self.duplicates += 1
             return
+        if link == FLEET_LINK and self.fleet_frame is not None:
+            offset = self.fleet_frame.offset()
+            if offset is None:
+                self.waiting[(source, "the fleet's frame: this vehicle's origin not known yet")] += 1
+                return
+            if np.any(offset):
+                decoded = dataclasses.replace(decoded, position_ned=decoded.position_ned - offset)
         track = _track_key(link, decoded.identity)
         self._fuse(track, source, decoded, policy, rx.t_s)
 
@@ -281,8 +293,12 @@ class ObstacleIntake:
         if decoded.positions.shape[0] == 0:
             self.peers.update(track, None)
             return
+        offset = np.zeros(3) if self.fleet_frame is None or link != FLEET_LINK else self.fleet_frame.offset()
+        if offset is None:
+            self.waiting[(source, "the fleet's frame: this vehicle's origin not known yet")] += 1
+            return
         self.peers.update(track, Intent(t0_s=t_v, spacing_s=self.peers.config.intent_knot_spacing_s,
-                                        positions=decoded.positions, velocities=decoded.velocities))
+                                        positions=decoded.positions - offset, velocities=decoded.velocities))
         self.accepted[f"{source} intent"] += 1
 
     def _is_duplicate(self, icao: int, msg, t_rx: float) -> bool:
