@@ -128,7 +128,7 @@ def test_that_the_fleet_frame_is_the_vehicles_origin_placed_about_the_fleets():
     assert np.allclose(frame.offset(), [30.0, -12.0, -2.0], atol=1e-6)
 
 
-def test_that_positions_cross_the_fleet_link_in_the_fleets_frame(monkeypatch):
+def test_that_positions_cross_the_fleet_link_in_the_fleets_frame():
     from companion.loop.fleet_frame import FleetFrame
     from companion.loop.vehicle_reference import VehicleReference
 
