@@ -80,8 +80,8 @@ class FleetAnnouncer:
             self.sent["states"] += 1
         due = t_s - self._last_intent_t >= self.config.intent_resend_s - 1e-6
         if plan is None:
-            if not self._withdrawn or due:
-                out.append(fleet.encode_intent(_usec(t_s if estimate is None else estimate.t_s), None, None))
+            if estimate is not None and (not self._withdrawn or due):   # nothing to withdraw before any state
+                out.append(fleet.encode_intent(_usec(estimate.t_s), None, None))
                 self._withdrawn, self._sent_plan, self._last_intent_t = True, None, t_s
                 self.sent["withdrawals"] += 1
             return out
