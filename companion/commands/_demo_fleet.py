@@ -211,13 +211,14 @@ def _realtime(scenario: Path, drones: list[dict], args: argparse.Namespace, out:
         "collided": truth.get("collided"), "goal_reached": truth.get("goal_reached"),
         "drone_drone_collisions": sum(p["min_clearance_m"] < 0.0 for p in (truth.get("pairs") or {}).values()),
         "drone_traffic_collisions": sum(bool(v.get("collided")) for v in per_vehicle),
-        "time_to_all_goals_s": (max(v["time_to_goal_s"] for v in per_vehicle)
+        "time_to_all_goals_s": (round(max(v["time_to_goal_s"] for v in per_vehicle), 2)
                                 if per_vehicle and all(v.get("time_to_goal_s") is not None for v in per_vehicle) else None),
         "min_pair_clearance_m": truth.get("min_pair_clearance_m"),
         "min_peer_realised_contour": min(contours) if contours else None,
         "setpoint_gap_max_ms": max(gaps) if gaps else None,
         "per_drone": [{"collided": v.get("collided"), "goal_reached": v.get("goal_reached"),
-                       "time_to_goal_s": v.get("time_to_goal_s"), "outcome": r.get("outcome"),
+                       "time_to_goal_s": None if v.get("time_to_goal_s") is None else round(v["time_to_goal_s"], 2),
+                       "outcome": r.get("outcome"),
                        "setpoint_rate_hz": r.get("setpoint_rate_hz"), "setpoint_gap_max_ms": r.get("setpoint_gap_max_ms"),
                        "stream_cpu_share": r.get("stream_cpu_share"), "cpu_share": r.get("cpu_share"),
                        "max_rss_mb": r.get("max_rss_mb"), "replans_with_slack": r.get("replans_with_slack"),

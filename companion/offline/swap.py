@@ -42,13 +42,21 @@ SWAP_BASE = _shipped("swap.toml")
 _TRAFFIC_SPEED_MPS = 1.5
 
 
+#: The crossing aircraft reach the circle this long after the start (s): the drones take off and
+#: engage first (a few seconds in real time), so the traffic meets them on their way, not
+#: hovering at their starts.
+TRAFFIC_ENTERS_AFTER_S = 8.0
+
+
 def _traffic(radius_m: float, altitude: float, template: dict, specs) -> list[dict]:
-    """Aircraft crossing the circle on chords: each spec (bearing rad, offset in radii, speed m/s)."""
+    """Aircraft crossing the circle on chords: each spec (bearing rad, offset in radii, speed m/s), reaching
+    the circle :data:`TRAFFIC_ENTERS_AFTER_S` after the start and flying as far beyond it."""
     out = []
     for k, (bearing, offset, speed) in enumerate(specs):
         direction = np.array([math.cos(bearing), math.sin(bearing)])
         normal = np.array([-direction[1], direction[0]])
-        half = 1.6 * radius_m
+        inside = math.sqrt(max(radius_m ** 2 - (offset * radius_m) ** 2, 0.0))   # half the chord
+        half = inside + speed * TRAFFIC_ENTERS_AFTER_S
         start = -half * direction + offset * radius_m * normal
         end = half * direction + offset * radius_m * normal
         ob = copy.deepcopy(template)
