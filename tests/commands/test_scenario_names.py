@@ -53,7 +53,9 @@ def test_that_mavsim_names_the_shipped_scenarios_for_an_unknown_name(argv, capsy
         code = exc.code
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
-    assert "nosuch: no such scenario file, and not a shipped scenario (antipodal, " in err and "single_obstacle)" in err
+    # every shipped scenario, in order, and nothing else
+    shipped = ", ".join(sorted(shipped_scenarios()))
+    assert f"nosuch: no such scenario file, and not a shipped scenario ({shipped})" in err, err
 
 
 def test_that_demo_single_obstacle_says_why_it_misses_its_goal(capsys):
