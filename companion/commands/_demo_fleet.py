@@ -78,7 +78,7 @@ def _lockstep(drones: list[dict], args: argparse.Namespace) -> dict:
     return summary
 
 
-def _free_run(n: int) -> int:
+def free_port_run(n: int) -> int:
     """A loopback UDP port p with p .. p+n-1 free now (mavsim shifts vehicle i's ports by i)."""
     for _ in range(100):
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -150,7 +150,7 @@ def _realtime(scenario: Path, drones: list[dict], args: argparse.Namespace, out:
         path = where / f"drone{i + 1}.toml"
         path.write_text(to_toml(data))
         files.append(path)
-    api, api_local, obstacle, obstacle_local, fleet = (_free_run(n) for _ in range(5))
+    api, api_local, obstacle, obstacle_local, fleet = (free_port_run(n) for _ in range(5))
     flies: list[subprocess.Popen] = []
     sim = None
     errors: list[str] = []

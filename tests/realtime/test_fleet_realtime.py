@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import json
 import signal
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
+from companion.commands._demo_fleet import free_port_run
 from companion.loop.config import read_scenario_toml
 from companion.offline.campaign.toml_writer import to_toml
 from companion.offline.swap import rotated_fleet
@@ -30,29 +30,6 @@ ROOT = Path(__file__).resolve().parents[2]
 SWAP = ROOT / "configs" / "swap.toml"
 RUN_S = 40.0
 TIMEOUT_S = 90.0
-
-
-def _free_run(n: int) -> int:
-    """A loopback UDP port p with p .. p+n-1 all free (mavsim shifts a vehicle's ports by its index)."""
-    for _ in range(50):
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            s.bind(("127.0.0.1", 0))
-            base = int(s.getsockname()[1])
-        if base + n > 65535:
-            continue
-        socks = []
-        try:
-            for k in range(n):
-                sk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                socks.append(sk)
-                sk.bind(("127.0.0.1", base + k))
-            return base
-        except OSError:
-            continue
-        finally:
-            for sk in socks:
-                sk.close()
-    raise RuntimeError("no run of free UDP ports")
 
 
 def _end(proc: subprocess.Popen) -> None:
@@ -72,7 +49,7 @@ def test_that_two_drones_swap_in_real_time_knowing_each_other_only_by_their_anno
         path = tmp_path / f"drone{i + 1}.toml"
         path.write_text(to_toml(data))
         files.append(path)
-    api, api_local, obstacle, obstacle_local, fleet = (_free_run(2) for _ in range(5))
+    api, api_local, obstacle, obstacle_local, fleet = (free_port_run(2) for _ in range(5))
     sim = subprocess.Popen(
         [sys.executable, "-m", "mavsim.cli", "--scenario", str(SWAP), "--vehicles", "2", "--no-gcs",
          "--api-port", str(api), "--api-local-port", str(api_local), "--obstacle-port", str(obstacle),
