@@ -22,6 +22,7 @@ from typing import NoReturn
 
 from companion.commands._help import PlainHelpFormatter
 from companion.errors import CompanionError
+from companion.realtime.service import JournalPrefixFormatter, stderr_is_journal
 
 logger = logging.getLogger(__name__)
 
@@ -92,14 +93,19 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    journal = stderr_is_journal()  # a systemd service: each line carries its priority for journald
+    handler = logging.StreamHandler()
+    log_format = "%(levelname)s %(name)s: %(message)s"
+    handler.setFormatter(JournalPrefixFormatter(log_format) if journal else logging.Formatter(log_format))
+    logging.basicConfig(level=level, handlers=[handler])
+    error = "<3>" if journal else ""
     try:
         return int(args.func(args) or 0)
     except CompanionError as exc:
-        print(f"companion {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{error}companion {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # a file or directory that cannot be read or written, a port in use
-        print(f"companion {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{error}companion {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

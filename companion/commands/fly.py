@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import faulthandler
 import json
 import logging
 import signal
@@ -139,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
     from companion.loop.app import Companion
     from companion.realtime.stream import PlanWorker, run_realtime
     from companion.realtime.run_end import RunEnd, RunEndConfig
+    from companion.realtime.service import ServiceNotifier
     from companion.loop.intake.traffic_config import FLEET_LINK, obstacle_link_name
     from companion.mavlink import messages
     from companion.mavlink.link import open_link
@@ -192,12 +194,20 @@ def run(args: argparse.Namespace) -> int:
         # the stream's priority for the stream only; the planning process, started above, keeps its own
         stream_nice, stream_fifo = resources.enter_context(
             stream_priority(fifo_priority=None if args.no_realtime_priority else STREAM_FIFO_PRIORITY))
+        # systemd (Type=notify): ready now, the loop's status, the watchdog from each tick
+        service = ServiceNotifier.from_environment()
+        resources.callback(service.close)
+        if service.watchdog_s is not None:  # killed by the watchdog (SIGABRT): every thread's stack to the journal
+            faulthandler.enable()
         started = microsecond_clock()
-        with _stop_on_signals(run_end):
+        service.ready(f"waiting for an autopilot on {args.connect}")
+        with _stop_on_signals(run_end, service):
             stats = run_realtime(companion, link, stop=_saying_what_it_waits_for(run_end, args.connect, started),
-                                 clock=microsecond_clock, tlog=tlog, obstacle_links=obstacle_links, after_tick=view,
+                                 clock=microsecond_clock, tlog=tlog, obstacle_links=obstacle_links,
+                                 after_tick=_each_after_tick(view, service.after_tick if service.enabled else None),
                                  fleet_links=fleet_links)
-    outcome = run_end.outcome(companion)
+        outcome = run_end.outcome(companion)
+        service.stopping(f"{outcome.text} (exit {outcome.code})")
     if companion.goal_error is not None:
         print(f"companion fly: {companion.goal_error}", file=sys.stderr)
     report = {"outcome": outcome.text, "exit_code": outcome.code, "stop_requested_by": run_end.stop_reason,
@@ -259,13 +269,28 @@ def _saying_what_it_waits_for(run_end, url: str, started: float):
     return stop
 
 
+def _each_after_tick(*hooks):
+    """One ``after_tick`` calling each hook given (None: left out) in turn; None if there is none."""
+    hooks = tuple(h for h in hooks if h is not None)
+    if len(hooks) <= 1:
+        return hooks[0] if hooks else None
+
+    def after_tick(companion, t_s: float, outbox) -> None:
+        for hook in hooks:
+            hook(companion, t_s, outbox)
+
+    return after_tick
+
+
 @contextlib.contextmanager
-def _stop_on_signals(run_end):
-    """SIGINT and SIGTERM become stop requests of ``run_end`` (the stream hands back first); restored after."""
+def _stop_on_signals(run_end, service):
+    """SIGINT and SIGTERM become stop requests of ``run_end`` (the stream hands back first); restored after.
+    systemd hears ``STOPPING=1`` at the first (``service``, a :class:`ServiceNotifier`)."""
     def request(signum, _frame) -> None:
         name = signal.Signals(signum).name
         run_end.request_stop(name)
         if len(run_end.requests) == 1:
+            service.stopping(f"{name}: handing the vehicle back")
             print(f"companion fly: {name}: handing the vehicle back (again to stop at once)", file=sys.stderr)
 
     previous = {sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}

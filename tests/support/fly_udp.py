@@ -8,6 +8,7 @@ teardown, and the setpoints the companion streamed, read back from its tlog.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import threading
@@ -42,7 +43,8 @@ def fly_beside_mavsim(scenario: Path, tmp_path: Path, *, autopilot_port: int, du
                       extra_obstacle_ports: Sequence[int] = (), start_sender: Callable[[], None] = lambda: None,
                       stop_sender: Callable[[], None] = lambda: None,
                       during: Callable[[subprocess.Popen, Simulator], None] | None = None,
-                      new_session: bool = False, fly_port: int | None = None) -> FlyRun:
+                      new_session: bool = False, fly_port: int | None = None,
+                      env: dict[str, str] | None = None) -> FlyRun:
     """Fly ``scenario`` with mavsim on ``autopilot_port`` while a sender runs; every wait bounded.
 
     mavsim's obstacles go to an obstacle link of their own; ``extra_obstacle_ports`` are
@@ -52,6 +54,7 @@ def fly_beside_mavsim(scenario: Path, tmp_path: Path, *, autopilot_port: int, du
     fly, or act on the simulated vehicle as a pilot would);
     ``new_session`` puts fly in a process group of its own (its planning process with it).
     ``fly_port``: the port fly listens on when it is not ``autopilot_port`` (a proxy between them).
+    ``env``: variables added to fly's environment (systemd's ``NOTIFY_SOCKET``, say).
     """
     sim_obstacle_port = free_udp_port()
     sim = Simulator(load_scenario(scenario), seed=0)
@@ -64,7 +67,8 @@ def fly_beside_mavsim(scenario: Path, tmp_path: Path, *, autopilot_port: int, du
         [sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{fly_port or autopilot_port}",
          "--scenario", str(scenario), *obstacles,
          "--duration", str(duration_s), "--exit-after-goal", "1.0", "--tlog", str(tlog), "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=new_session)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=new_session,
+        env=None if env is None else {**os.environ, **env})
     time.sleep(0.5)  # the companion's sockets are bound before mavsim sends
     serve.start()
     start_sender()
