@@ -9,7 +9,6 @@ import json
 import logging
 import signal
 import sys
-import time
 
 from companion.commands._argtypes import (
     connection_string,
@@ -119,12 +118,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def microsecond_clock() -> float:
-    """Unix time rounded to whole microseconds: the times the loop acts on are exactly the
-    times a tlog can store, so a recorded flight replays tick for tick."""
-    return round(time.time() * 1e6) * 1e-6
-
-
 def run(args: argparse.Namespace) -> int:
     if args.identify:
         from companion.commands.fly_identify import run as fly_identification
@@ -140,6 +133,7 @@ def run(args: argparse.Namespace) -> int:
     from companion.loop.app import Companion
     from companion.realtime.stream import PlanWorker, run_realtime
     from companion.realtime.run_end import RunEnd, RunEndConfig
+    from companion.realtime.clock import SteadyUnixClock
     from companion.realtime.service import ServiceNotifier
     from companion.loop.intake.traffic_config import FLEET_LINK, obstacle_link_name
     from companion.mavlink import messages
@@ -156,6 +150,9 @@ def run(args: argparse.Namespace) -> int:
     except SigningKeyError as exc:
         raise ConfigError(str(exc)) from None
     stats = None
+    # Unix time in whole microseconds (what a tlog stores: a flight replays tick for tick), advancing
+    # with the monotonic clock: a step of the system clock (a time sync) moves nothing here
+    microsecond_clock = SteadyUnixClock()
     with contextlib.ExitStack() as resources:  # each closed once, in reverse order, however the run ends
         tlog = TlogWriter(args.tlog) if args.tlog else None  # the stream writes it, in handling order
         if tlog is not None:

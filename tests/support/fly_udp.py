@@ -44,7 +44,8 @@ def fly_beside_mavsim(scenario: Path, tmp_path: Path, *, autopilot_port: int, du
                       stop_sender: Callable[[], None] = lambda: None,
                       during: Callable[[subprocess.Popen, Simulator], None] | None = None,
                       new_session: bool = False, fly_port: int | None = None,
-                      env: dict[str, str] | None = None) -> FlyRun:
+                      env: dict[str, str] | None = None,
+                      launcher: Sequence[str] = ("-m", "companion.cli")) -> FlyRun:
     """Fly ``scenario`` with mavsim on ``autopilot_port`` while a sender runs; every wait bounded.
 
     mavsim's obstacles go to an obstacle link of their own; ``extra_obstacle_ports`` are
@@ -55,6 +56,7 @@ def fly_beside_mavsim(scenario: Path, tmp_path: Path, *, autopilot_port: int, du
     ``new_session`` puts fly in a process group of its own (its planning process with it).
     ``fly_port``: the port fly listens on when it is not ``autopilot_port`` (a proxy between them).
     ``env``: variables added to fly's environment (systemd's ``NOTIFY_SOCKET``, say).
+    ``launcher``: Python's arguments before ``fly`` (a wrapper module instead of ``companion.cli``).
     """
     sim_obstacle_port = free_udp_port()
     sim = Simulator(load_scenario(scenario), seed=0)
@@ -64,7 +66,7 @@ def fly_beside_mavsim(scenario: Path, tmp_path: Path, *, autopilot_port: int, du
     tlog = tmp_path / "fly.tlog"
     obstacles = [arg for p in (sim_obstacle_port, *extra_obstacle_ports) for arg in ("--obstacles", f"udpin:127.0.0.1:{p}")]
     fly = subprocess.Popen(
-        [sys.executable, "-m", "companion.cli", "fly", "--connect", f"udpin:127.0.0.1:{fly_port or autopilot_port}",
+        [sys.executable, *launcher, "fly", "--connect", f"udpin:127.0.0.1:{fly_port or autopilot_port}",
          "--scenario", str(scenario), *obstacles,
          "--duration", str(duration_s), "--exit-after-goal", "1.0", "--tlog", str(tlog), "--json"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=new_session,
