@@ -31,6 +31,9 @@ from companion.realtime.stream_priority import STREAM_FIFO_PRIORITY, stream_prio
 logger = logging.getLogger(__name__)
 
 _PLANNER_START_S = 30.0
+#: Replan records a flight keeps (the latest; about 7 KB each, 3.3 a second: 90 s, 2 MB): the
+#: live view draws the newest, the report sums every replan (``Companion.tally``).
+REPLAN_HISTORY = 300
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -170,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
         if not worker.wait_ready(_PLANNER_START_S):
             raise CompanionError(f"the planning process did not start within {_PLANNER_START_S:.0f} s")
         companion = Companion(scenario, offboard=offboard, planning=worker, fleet=bool(args.fleet),
-                              **goal_keywords(args, scenario))
+                              replan_history=REPLAN_HISTORY, **goal_keywords(args, scenario))
         run_end = RunEnd(RunEndConfig(duration_s=args.duration, hand_back_timeout_s=args.hand_back_timeout,
                                       linger_s=args.linger))
         # the fleet's links: the other drones' announcements in (tlogged as traffic), ours out

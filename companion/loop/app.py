@@ -30,7 +30,8 @@ Every edge (lockstep, real time, replay) makes those calls through one
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections import deque
+from collections.abc import MutableSequence, Sequence
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -53,7 +54,7 @@ from companion.loop.planning import InlinePlanning, PlanningService
 from companion.loop.fleet_announcer import FleetAnnouncer
 from companion.loop.fleet_frame import FleetFrame
 from companion.loop.peer_intents import PeerIntents
-from companion.loop.records import CompanionState, LoopMode, ReplanRecord
+from companion.loop.records import CompanionState, LoopMode, ReplanRecord, ReplanTally
 from companion.loop.right_of_way import RightOfWay
 from companion.loop.request_builder import RequestBuilder
 from companion.loop.supervisor import Supervisor
@@ -99,13 +100,17 @@ class Companion:
         heard on obstacle links are used as ``[fleet]`` says (:mod:`companion.loop.peer_intents`),
         and each tick fills :attr:`fleet_outbox` with this drone's announcements
         (:mod:`companion.loop.fleet_announcer`) for the edge to send on the fleet link.
+    replan_history : int or None
+        Keep only the latest this many :attr:`records` (a live flight: a record is about 7 KB,
+        3.3 a second); None keeps every one (lockstep runs, figures, campaigns). The run report
+        reads :attr:`tally`, which sums every replan either way.
     """
 
     def __init__(self, scenario: CompanionScenario, offboard: OffboardConfig | None = None, *,
                  sequencer: OffboardSequence | None = None, planning: PlanningService | None = None,
                  goal: GoalSource | None = None, obstacle_sources: Sequence[ObstacleSource] | None = None,
                  reference: VehicleReference | None = None, fence: FenceSource | None = None,
-                 fleet: bool = False) -> None:
+                 fleet: bool = False, replan_history: int | None = None) -> None:
         self.scenario = scenario
         self.planner_config = scenario.planner
         self.settings = scenario.companion
@@ -138,11 +143,15 @@ class Companion:
         self.executor = Executor(scenario.planner, 1.0 / self.settings.setpoint_rate_hz, self.planner.lag,
                                  max_plan_age_s=self.settings.max_plan_age_s)
         self.state = CompanionState()
-        self.records: list[ReplanRecord] = []
+        #: the applied replans' records: every one, or the latest ``replan_history`` (a live flight)
+        self.records: MutableSequence[ReplanRecord] = [] if replan_history is None else deque(maxlen=replan_history)
+        #: every applied replan summed, for the report (whatever ``records`` keeps)
+        self.tally = ReplanTally()
         self.supervisor = Supervisor(self.settings.timesync_hz, events=self.state.events)
         self.cycle = PlanCycle(self.planner_config, self.settings, planning=self.planning, builder=self.builder,
                                executor=self.executor, perception=self.perception, supervisor=self.supervisor,
-                               state=self.state, records=self.records, on_goal_reached=self.sequencer.on_goal_reached)
+                               state=self.state, records=self.records, tally=self.tally,
+                               on_goal_reached=self.sequencer.on_goal_reached)
         self.inbound = InboundRouter(self.obstacles, self.perception, self.sequencer, self.state)
         self.commanding = Commanding(self.settings, perception=self.perception, executor=self.executor,
                                      cycle=self.cycle, supervisor=self.supervisor, goal=self.builder.goal,

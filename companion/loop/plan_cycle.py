@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, MutableSequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +24,8 @@ from companion.loop.config import LoopConfig
 from companion.loop.executor import Executor
 from companion.loop.perception import Perception
 from companion.loop.planning import PlanningService, PlanResult
-from companion.loop.records import CompanionState, LoopMode, PlanStatus, ReplanRecord
+from companion.loop.intake.traffic_config import is_fleet_peer
+from companion.loop.records import CompanionState, LoopMode, PlanStatus, ReplanRecord, ReplanTally
 from companion.loop.request_builder import RequestBuilder
 from companion.loop.supervisor import SEV_INFO, SEV_NOTICE, SEV_WARNING, RateLimiter, Supervisor
 from companion.mavlink import messages
@@ -62,18 +63,20 @@ class PlanCycle:
     executor : flies the adopted plan.
     perception : the vehicle state (filters, clock, drift, response observer).
     supervisor : says what happened.
-    state, records : the loop's statistics and replan records (shared with the run report).
+    state, records : the loop's statistics and replan records (shared with the run report; ``records``
+        may keep only the latest, a ``deque`` with a ``maxlen``).
+    tally : every applied replan summed (:class:`~companion.loop.records.ReplanTally`), for the report.
     on_goal_reached : called with the link time when the goal is first reached.
     """
 
     def __init__(self, planner_config: PlannerConfig, settings: LoopConfig, *, planning: PlanningService,
                  builder: RequestBuilder, executor: Executor, perception: Perception, supervisor: Supervisor,
-                 state: CompanionState, records: list[ReplanRecord],
+                 state: CompanionState, records: MutableSequence[ReplanRecord], tally: ReplanTally,
                  on_goal_reached: Callable[[float], None]) -> None:
         self.cfg, self.settings = planner_config, settings
         self.planning, self.builder, self.executor = planning, builder, executor
         self.perception, self.supervisor = perception, supervisor
-        self.state, self.records = state, records
+        self.state, self.records, self.tally = state, records, tally
         self._on_goal_reached = on_goal_reached
         self._replans_asked = 0
         self._replan = RateLimiter(planner_config.replan_period_s, tolerance_s=1e-9)
@@ -252,29 +255,29 @@ class PlanCycle:
         ct_plan = np.asarray(plan.contour_of_touch)[in_range]
         planned_contour = {} if status is PlanStatus.FAILED else {
             key: float(plan.contour_of_touch[i][0]) for i, key in enumerate(job.tracks_constrained) if in_range[i]}
-        self.records.append(
-            ReplanRecord(
-                t_link_s=job.t_link_s,
-                t_vehicle_s=job.t_vehicle_s,
-                status=status,
-                iterations=int(plan.iterations),
-                solve_time_s=float(plan.solve_time_s),
-                slack_max=float(plan.slack_max),
-                planned_min_contour=float(ct_plan.min()) if ct_plan.size else math.nan,
-                realised_contour=job.realised_contour,
-                drone_position=job.position.copy(),
-                drone_cov=job.drone_cov.copy(),
-                drone_velocity=job.drone_velocity,
-                obstacle_positions=job.obstacle_positions,
-                obstacle_covs=job.obstacle_covs,
-                target=job.target,
-                plan_positions=np.asarray(plan.positions).copy(),
-                command=np.asarray(plan.commands[0]).copy() if status is not PlanStatus.FAILED else np.zeros(3),
-                t_applied_s=t_s,
-                tracks_unconstrained=len(job.tracks_unconstrained),
-                tracks_giving_way=len(job.tracks_giving_way),
-                tracks_along_intent=len(job.tracks_along_intent),
-                planned_contour=planned_contour,
-            )
+        record = ReplanRecord(
+            t_link_s=job.t_link_s,
+            t_vehicle_s=job.t_vehicle_s,
+            status=status,
+            iterations=int(plan.iterations),
+            solve_time_s=float(plan.solve_time_s),
+            slack_max=float(plan.slack_max),
+            planned_min_contour=float(ct_plan.min()) if ct_plan.size else math.nan,
+            realised_contour=job.realised_contour,
+            drone_position=job.position.copy(),
+            drone_cov=job.drone_cov.copy(),
+            drone_velocity=job.drone_velocity,
+            obstacle_positions=job.obstacle_positions,
+            obstacle_covs=job.obstacle_covs,
+            target=job.target,
+            plan_positions=np.asarray(plan.positions).copy(),
+            command=np.asarray(plan.commands[0]).copy() if status is not PlanStatus.FAILED else np.zeros(3),
+            t_applied_s=t_s,
+            tracks_unconstrained=len(job.tracks_unconstrained),
+            tracks_giving_way=len(job.tracks_giving_way),
+            tracks_along_intent=len(job.tracks_along_intent),
+            planned_contour=planned_contour,
         )
+        self.records.append(record)
+        self.tally.add(record, is_peer=is_fleet_peer)
         return said

@@ -101,6 +101,7 @@ def run_lockstep(
     inject_vehicle: Callable[[float], list[bytes]] | None = None,
     after_tick: Callable[[Companion, float, list], None] | None = None,
     autopilot: str | None = None,
+    replan_history: int | None = None,
     **planner_overrides,
 ) -> RunResult:
     """Fly one scenario in lockstep: ``mavsim`` and the companion over MAVLink bytes.
@@ -123,6 +124,8 @@ def run_lockstep(
     after_tick : ``after_tick(companion, t_s, outbox)`` after every tick (a view, :mod:`companion.view`).
     autopilot : the autopilot mavsim imitates (a name of ``mavsim.personalities.PERSONALITIES``,
         e.g. ``"ardupilot"``); None: mavsim's default (PX4).
+    replan_history : keep only the latest this many replan records, as ``companion fly`` does
+        (``Companion(replan_history=...)``); None keeps every one.
     **planner_overrides : replace ``[planner]`` keys (e.g. ``formulation``, ``c_max``).
     """
     if isinstance(scenario, (str, Path)):
@@ -131,7 +134,7 @@ def run_lockstep(
     else:
         config, sim_scenario = _parse(scenario, planner_overrides)
         sim = LockstepSimulator(sim_scenario, seed=seed, tlog=sim_tlog_path, **_personality(autopilot))
-    companion = Companion(config, offboard=offboard)
+    companion = Companion(config, offboard=offboard, replan_history=replan_history)
     jit.warm_up()  # load the compiled kernels now, not inside the first solve (its reported solve time)
     link = MemoryLink(clock=lambda: sim.time_s, tlog=tlog_path, tlog_offset_s=LOCKSTEP_EPOCH_S)
     # Obstacles with transport = "link" arrive on their own receive-only link, as on a vehicle.

@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from companion.loop.app import Companion
-from companion.loop.intake.traffic_config import FLEET_LINK
-from companion.loop.records import describe_tracking, status_counts
+from companion.loop.records import describe_tracking
 
 #: What makes an event an alert: the companion braked (stale estimate, no valid plan, a plan
 #: too old), used safety slack, or lost control of the vehicle (pilot, link, gave up).
@@ -23,10 +20,8 @@ def companion_report(companion: Companion) -> dict:
     or never came back), ``min_planned_contour`` from the applied plans (obstacles in
     sensing range only). Solve times in milliseconds.
     """
-    records = companion.records
-    solve = np.array([r.solve_time_s for r in records]) if records else np.zeros(0)
-    planned = [r.planned_min_contour for r in records if math.isfinite(r.planned_min_contour)]
-    statuses = status_counts(r.status for r in records)
+    tally = companion.tally   # every applied replan, however few records a live flight keeps
+    solve = np.array(tally.solve_times_s, dtype=float)   # a copy: a view would pin the array's size
     state = companion.state
     report = {
         "formulation": companion.planner_config.formulation,
@@ -37,12 +32,12 @@ def companion_report(companion: Companion) -> dict:
         "goal_reached_companion_t_s": state.goal_reached_t_s,
         "min_estimated_clearance_m": state.min_track_clearance_m,
         "vehicle_mode": getattr(companion.sequencer, "vehicle_mode", None),
-        "replans": len(records),
-        "plan_status": statuses,
+        "replans": tally.count,
+        "plan_status": tally.status_counts(),
         "replans_with_slack": state.slack_plans,
         "failed_plans": state.failed_plans,
         "min_realised_contour": state.min_realised_contour,  # every request's, not only the applied plans'
-        "min_planned_contour": min(planned) if planned else None,
+        "min_planned_contour": tally.min_planned_contour,
         "solve_time_median_ms": float(np.median(solve) * 1e3) if solve.size else None,
         "solve_time_p99_ms": float(np.percentile(solve, 99) * 1e3) if solve.size else None,
         "stale_events": state.stale_events,
@@ -80,12 +75,7 @@ def companion_report(companion: Companion) -> dict:
 def min_peer_contour(companion: Companion) -> float | None:
     """The smallest realised contour of touch between the drone's estimate and a peer's (a track
     on the fleet link, keyed by its MAVLink system) over the run's replans; None: no peer heard."""
-    worst = None
-    for rec in companion.records:
-        for key, value in (rec.realised_contour or {}).items():
-            if isinstance(key, tuple) and len(key) == 3 and key[2] == FLEET_LINK and isinstance(key[0], int):
-                worst = value if worst is None else min(worst, value)
-    return worst
+    return companion.tally.min_peer_contour
 
 
 def truth_report(truth: dict) -> dict:

@@ -321,9 +321,9 @@ def _signatures_rejected(links: Sequence[Link]) -> int:
 class StreamStats:
     """What the stream thread did, measured on its clock (s).
 
-    ``setpoint_gaps_s`` holds every gap between consecutive setpoints while streaming
-    (bounded by the run's length at the setpoint rate); ``probe`` says where the largest
-    one's time went (:mod:`companion.realtime.gap_probe`).
+    The gaps between consecutive setpoints are summed as they come (the largest, when it
+    ended, how many exceeded ``gap_limit_s``), so a long flight holds no list of them;
+    ``probe`` says where the largest one's time went (:mod:`companion.realtime.gap_probe`).
     """
 
     ticks: int = 0
@@ -332,7 +332,10 @@ class StreamStats:
     setpoints: int = 0
     first_setpoint_s: float | None = None
     last_setpoint_s: float | None = None
-    setpoint_gaps_s: list = field(default_factory=list)
+    gap_limit_s: float = 0.15
+    setpoint_gap_max_s: float | None = None
+    setpoint_gap_max_end_s: float | None = None   #: when the largest gap ended (the stream's clock, s)
+    setpoint_gaps_over_limit: int = 0
     max_tick_s: float = 0.0
     inbound_dropped: int = 0
     inbound_backlog_at_end: int = 0
@@ -348,25 +351,28 @@ class StreamStats:
         gap = None if self.last_setpoint_s is None else t_s - self.last_setpoint_s
         self.probe.setpoint(gap)
         if gap is not None:
-            self.setpoint_gaps_s.append(gap)
+            if self.setpoint_gap_max_s is None or gap > self.setpoint_gap_max_s:
+                self.setpoint_gap_max_s, self.setpoint_gap_max_end_s = gap, t_s
+            self.setpoint_gaps_over_limit += gap > self.gap_limit_s
         if self.first_setpoint_s is None:
             self.first_setpoint_s = t_s
         self.last_setpoint_s = t_s
         self.setpoints += 1
 
-    def summary(self, gap_limit_s: float = 0.15) -> dict:
+    def summary(self) -> dict:
         """Rate (Hz), largest gap (ms), gaps over ``gap_limit_s``, the longest tick (ms)."""
         span = (self.last_setpoint_s or 0.0) - (self.first_setpoint_s or 0.0)
-        gaps = self.setpoint_gaps_s
+        gap_max = self.setpoint_gap_max_s
         return {
             "ticks": self.ticks,
             "late_ticks": self.late_ticks,
             "setpoints": self.setpoints,
             "setpoint_rate_hz": round((self.setpoints - 1) / span, 2) if span > 0 else None,
-            "setpoint_gap_max_ms": round(max(gaps) * 1e3, 1) if gaps else None,
+            "setpoint_gap_max_ms": round(gap_max * 1e3, 1) if gap_max is not None else None,
             # when the largest gap ended, seconds after the first setpoint
-            "setpoint_gap_max_at_s": round(sum(gaps[: gaps.index(max(gaps)) + 1]), 2) if gaps else None,
-            "setpoint_gaps_over_150ms": sum(g > gap_limit_s for g in gaps),
+            "setpoint_gap_max_at_s": (round(self.setpoint_gap_max_end_s - self.first_setpoint_s, 2)
+                                      if gap_max is not None else None),
+            f"setpoint_gaps_over_{round(self.gap_limit_s * 1e3)}ms": self.setpoint_gaps_over_limit,
             "tick_max_ms": round(self.max_tick_s * 1e3, 1),
             "gc_collections": self.collections,
             "gc_pause_max_ms": round(self.max_collection_s * 1e3, 1),

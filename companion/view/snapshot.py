@@ -11,6 +11,7 @@ on the copy, on another thread when live (:mod:`companion.view.publisher`).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -85,12 +86,13 @@ class Snapshots:
             st = tracker.state(key)
             tracks.append(Estimate(_track_name(key), np.array(st.position), np.array(st.position_cov)))
         replans = []
-        records = companion.records
-        if len(records) > self._records_seen:
+        new = companion.tally.count - self._records_seen   # records may keep only the latest (a live flight)
+        if new > 0:
             step_s = companion.planner_config.step_s
-            for record in records[self._records_seen:]:
+            records = companion.records
+            for record in itertools.islice(records, max(0, len(records) - new), None):
                 replans.append(Replan(record, _horizon(companion, record, step_s), step_s))
-            self._records_seen = len(records)
+            self._records_seen = companion.tally.count
         return TickSnapshot(t_s=t_s, t_vehicle_s=companion.vehicle_time(t_s), mode=str(companion.state.mode.value),
                             drone=drone, tracks=tuple(tracks), setpoint=_setpoint(outbox), replans=tuple(replans),
                             scenario=companion.scenario)

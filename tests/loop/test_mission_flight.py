@@ -93,9 +93,10 @@ def test_that_a_vehicle_without_a_mission_is_one_error_and_nothing_flown(tmp_pat
 
     made = harness.Companion
 
-    def with_download(config, offboard=None):
+    def with_download(config, offboard=None, **keywords):
         reference = VehicleReference()
-        return made(config, offboard=offboard, goal=MissionGoal(config.mission, reference, None), reference=reference)
+        return made(config, offboard=offboard, goal=MissionGoal(config.mission, reference, None), reference=reference,
+                    **keywords)
 
     monkeypatch.setattr(harness, "Companion", with_download)
     plan = tmp_path / "unused.plan"

@@ -52,6 +52,11 @@ OBSTACLE_LINK_PREFIX = "obstacles"
 FLEET_LINK = "fleet"
 
 
+def is_fleet_peer(key) -> bool:
+    """Whether a track's key is a fleet peer's: ``(system, component, FLEET_LINK)`` with an integer system."""
+    return isinstance(key, tuple) and len(key) == 3 and key[2] == FLEET_LINK and isinstance(key[0], int)
+
+
 def obstacle_link_name(index: int) -> str:
     """Name of the ``index``-th obstacle link (0-based): ``obstacles1``, ``obstacles2``..."""
     return f"{OBSTACLE_LINK_PREFIX}{index + 1}"
