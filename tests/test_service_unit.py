@@ -93,3 +93,9 @@ def test_that_the_unit_agrees_with_fly():
     watchdog_s = seconds(setting("WatchdogSec"))
     # far above the stream's gaps (tens of ms; 150 ms is its own alarm), short enough to name a hang
     assert 1.0 <= watchdog_s <= 5.0
+
+
+def test_that_real_vehicle_md_shows_the_units_command_as_shipped():
+    page = (ROOT / "docs" / "REAL_VEHICLE.md").read_text(encoding="utf-8")
+    block = page.split("```ini\n", 1)[1].split("```", 1)[0]
+    assert unit_settings("[Service]\n" + block)[("Service", "ExecStart")] == [setting("ExecStart")]
