@@ -221,6 +221,7 @@ def _realtime(scenario: Path, drones: list[dict], args: argparse.Namespace, out:
                        "outcome": r.get("outcome"),
                        "setpoint_rate_hz": r.get("setpoint_rate_hz"), "setpoint_gap_max_ms": r.get("setpoint_gap_max_ms"),
                        "stream_cpu_share": r.get("stream_cpu_share"), "cpu_share": r.get("cpu_share"),
+                       "cpu_share_in_flight": r.get("cpu_share_in_flight"),
                        "max_rss_mb": r.get("max_rss_mb"), "replans_with_slack": r.get("replans_with_slack"),
                        "failed_plans": r.get("failed_plans")}
                       for v, r in zip(per_vehicle, reports)],
@@ -245,7 +246,8 @@ def format_fleet(s: dict) -> str:
     lines.append(f"wall time [s]: {s['wall_time_s']}")
     for i, d in enumerate(s["per_drone"]):
         extra = (f", stream {d.get('setpoint_rate_hz')} Hz, gap {d.get('setpoint_gap_max_ms')} ms, "
-                 f"CPU {f(d.get('cpu_share'), '.1%')}, RSS {d.get('max_rss_mb')} MB" if s.get("mode") == "realtime" else "")
+                 f"CPU {f(d.get('cpu_share_in_flight'), '.1%')} in flight ({f(d.get('cpu_share'), '.1%')} with start-up), "
+                 f"RSS {d.get('max_rss_mb')} MB" if s.get("mode") == "realtime" else "")
         lines.append(f"  drone {i + 1}: goal {d['goal_reached']} at {d['time_to_goal_s']} s, collided {d['collided']}, "
                      f"slack replans {d['replans_with_slack']}, failed plans {d['failed_plans']}{extra}")
     return "\n".join(lines)

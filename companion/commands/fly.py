@@ -7,6 +7,7 @@ import contextlib
 import faulthandler
 import json
 import logging
+import os
 import signal
 import sys
 
@@ -201,11 +202,13 @@ def run(args: argparse.Namespace) -> int:
             faulthandler.enable()
         started = microsecond_clock()
         service.ready(f"waiting for an autopilot on {args.connect}")
+        planner_cpu_start = process_cpu_s(worker.pid)
         with _stop_on_signals(run_end, service):
             stats = run_realtime(companion, link, stop=_saying_what_it_waits_for(run_end, args.connect, started),
                                  clock=microsecond_clock, tlog=tlog, obstacle_links=obstacle_links,
                                  after_tick=_each_after_tick(view, service.after_tick if service.enabled else None),
                                  fleet_links=fleet_links)
+        planner_cpu_end = process_cpu_s(worker.pid)
         outcome = run_end.outcome(companion)
         service.stopping(f"{outcome.text} (exit {outcome.code})")
     if companion.goal_error is not None:
@@ -222,6 +225,9 @@ def run(args: argparse.Namespace) -> int:
         report.update(stats.summary())
         report["wall_s"] = round(stats.wall_s, 2)
         report.update(_resources_used(stats.wall_s))
+        # both processes from the stream's first tick to its last: what flying costs, start-up left out
+        if planner_cpu_start is not None and planner_cpu_end is not None and stats.wall_s > 0:
+            report["cpu_share_in_flight"] = round((stats.cpu_s + planner_cpu_end - planner_cpu_start) / stats.wall_s, 3)
     report["planner_process"] = {
         "solved": worker.stats.solved, "superseded": worker.stats.superseded, "errors": worker.stats.errors,
         "max_solve_ms": round(worker.stats.max_solve_s * 1e3, 1),
@@ -238,6 +244,19 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(format_report(report), file=sys.stdout)
     return outcome.code
+
+
+def process_cpu_s(pid: int | None) -> float | None:
+    """CPU time (user + system, s) process ``pid`` has used so far, from ``/proc/PID/stat``;
+    None where that cannot be read (no such process, not Linux)."""
+    if pid is None:
+        return None
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()   # after the command name, which may hold spaces
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")   # utime, stime (fields 14, 15)
+    except (OSError, IndexError, ValueError):
+        return None
 
 
 def _resources_used(wall_s: float) -> dict:

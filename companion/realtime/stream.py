@@ -164,6 +164,11 @@ class PlanWorker:
         return self._ready
 
     @property
+    def pid(self) -> int | None:
+        """The planning process's id (None before it started)."""
+        return self._proc.pid
+
+    @property
     def busy(self) -> bool:
         """A job is being solved or waiting, or its answer has not been collected."""
         return self._in_flight is not None or self._pending is not None
