@@ -11,7 +11,7 @@ import enum
 import logging
 import math
 from array import array
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -97,6 +97,55 @@ class ReplanRecord:
     planned_contour: dict = field(default_factory=dict)
     tracks_giving_way: int = 0
     tracks_along_intent: int = 0
+
+
+class EventLog:
+    """What the loop said, as (link time s, text) in order, in bounded memory.
+
+    A long flight says a line at every slack replan (up to 3.3 a second in a crowd): the first
+    ``head`` events are kept (the engagement, the first alerts) and the latest ``tail``; those
+    between are counted (:attr:`total` less the kept). Iterates, compares and indexes like the
+    list of the kept events.
+    """
+
+    def __init__(self, head: int = 500, tail: int = 1500) -> None:
+        self._head: list[tuple[float, str]] = []
+        self._tail: deque[tuple[float, str]] = deque(maxlen=tail)
+        self._head_size = head
+        self.total = 0   #: every event said, kept or not
+
+    def append(self, event: tuple[float, str]) -> None:
+        self.total += 1
+        if len(self._head) < self._head_size:
+            self._head.append(event)
+        else:
+            self._tail.append(event)
+
+    @property
+    def dropped(self) -> int:
+        """Events said between the first and the latest kept, not kept."""
+        return self.total - len(self)
+
+    def __iter__(self):
+        yield from self._head
+        yield from self._tail
+
+    def __len__(self) -> int:
+        return len(self._head) + len(self._tail)
+
+    def __bool__(self) -> bool:
+        return self.total > 0
+
+    def __getitem__(self, index: int) -> tuple[float, str]:
+        if index == -1 and self._tail:
+            return self._tail[-1]
+        return list(self)[index]
+
+    def __eq__(self, other: object) -> bool:
+        return list(self) == list(other) if isinstance(other, (EventLog, list)) else NotImplemented
+
+    def __repr__(self) -> str:
+        return f"EventLog({list(self)!r}, total={self.total})"
 
 
 class ReplanTally:
@@ -202,4 +251,5 @@ class CompanionState:
     drift_max_mps: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
     #: the estimate against the plan in force at each replan request (see :class:`TrackingError`)
     tracking: TrackingError = field(default_factory=TrackingError)
-    events: list = field(default_factory=list)
+    #: what the loop said, (link time s, text), in order (the first and the latest kept: :class:`EventLog`)
+    events: "EventLog" = field(default_factory=lambda: EventLog())

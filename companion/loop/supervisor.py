@@ -14,6 +14,7 @@ import math
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from companion.loop.records import EventLog
 from companion.mavlink import messages
 
 logger = logging.getLogger(__name__)
@@ -65,12 +66,12 @@ class Supervisor:
     ----------
     timesync_hz : float
         Rate of TIMESYNC requests to the autopilot once it is known (0: none).
-    events : list, optional
-        Where every STATUSTEXT said goes, as (link time s, text), for the run report.
+    events : EventLog, optional
+        Where every STATUSTEXT said goes, as (link time s, text), for the run report (a list will do).
     """
 
-    def __init__(self, timesync_hz: float, events: list[tuple[float, str]] | None = None) -> None:
-        self.events: list[tuple[float, str]] = [] if events is None else events
+    def __init__(self, timesync_hz: float, events: EventLog | list | None = None) -> None:
+        self.events: EventLog = EventLog() if events is None else events
         self._heartbeat = RateLimiter(HEARTBEAT_PERIOD_S, tolerance_s=1e-9)
         self._timesync = RateLimiter(1.0 / timesync_hz, tolerance_s=1e-9) if timesync_hz > 0.0 else None
         self._signature = RateLimiter(SIGNATURE_WARN_PERIOD_S)

@@ -57,6 +57,8 @@ def companion_report(companion: Companion) -> dict:
         "alerts": [(round(t, 2), text) for t, text in state.events if any(w in text for w in _ALERT_WORDS)],
         "events": [(round(t, 2), text) for t, text in state.events],
     }
+    if state.events.dropped:   # a long flight: the first and the latest are listed
+        report["events_not_kept"] = state.events.dropped
     mission = getattr(companion.goal, "summary", None)   # a mission goal: the items reached
     if callable(mission):
         report.update(mission())
