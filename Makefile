@@ -5,7 +5,7 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 BSTAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench campaign reliability campaign-test realtime-test crowd-test fault-campaign px4-test ardupilot-test ardupilot-adsb-test quarantine-test flake-check venv clean
+.PHONY: demo test bench campaign reliability campaign-test realtime-test crowd-test fault-campaign px4-test ardupilot-test ardupilot-adsb-test mavproxy-test quarantine-test flake-check venv clean
 
 # PX4 SITL build with start-sih (see docs/PX4.md); `make px4-test` flies the companion against it.
 PX4_SITL_DIR ?= ../shared/px4-sitl
@@ -71,6 +71,16 @@ campaign-test: $(STAMP)
 # Tests marked quarantine are not 20 of 20 in `make flake-check` yet: CI leaves them out.
 realtime-test: $(STAMP)
 	$(VENV)/bin/pytest -q -m 'realtime and not quarantine'
+
+# fly through MAVProxy, the router (docs/FAULTS.md). MAVProxy goes into a venv of its own, without the
+# GUI's dependencies (vtk, opencv, wxPython: hundreds of MB a router does not use); MAVPROXY=PATH uses another.
+MAVPROXY_VENV := out/mavproxy-venv
+MAVPROXY_VERSION ?= 1.8.75
+$(MAVPROXY_VENV)/bin/mavproxy.py: | $(VPY)
+	$(PYTHON) -m venv $(MAVPROXY_VENV)
+	$(MAVPROXY_VENV)/bin/pip install -q --no-deps MAVProxy==$(MAVPROXY_VERSION) pymavlink pyserial numpy pynmeagps defusedxml
+mavproxy-test: $(STAMP) $(MAVPROXY_VENV)/bin/mavproxy.py
+	$(VENV)/bin/pytest -q -m mavproxy
 
 # Only the flights with 200 extra obstacle systems (antipodal and corridor, the corridor in quarantine).
 crowd-test: $(STAMP)

@@ -39,6 +39,7 @@ STAGES: dict[str, list[str]] = {
     "px4": ["-s", "-m", "px4 and not quarantine", "tests/px4"],
     "quarantine": ["-m", "quarantine"],
     "ardupilot": ["-s", "-m", "ardupilot and not ardupilot_adsb", "tests/ardupilot"],
+    "mavproxy": ["-m", "mavproxy"],   # `make mavproxy-test`'s flights (MAVPROXY, or out/mavproxy-venv)
 }
 
 
