@@ -81,6 +81,7 @@ def test_that_fly_tells_systemd_ready_status_watchdog_and_stopping(tmp_path):
     assert "Traceback" not in run.err, run.err[-3000:]
     assert run.returncode == 3, run.err[-3000:]
     report = json.loads(run.out)
+    print(json.dumps({k: report.get(k) for k in ("outcome", "setpoint_rate_hz", "setpoint_gap_max_ms", "cpu_share_in_flight", "cpu_share", "max_rss_mb", "planner_process", "stream_fifo_priority")}))
     assert report["outcome"] == "stopped" and report["phase"] == "HELD"
 
     heard = listener.heard
