@@ -77,6 +77,8 @@ def test_that_two_drones_swap_in_real_time_knowing_each_other_only_by_their_anno
     for code, out, err in outs:
         assert code == 0, err[-2000:]
         reports.append(json.loads(out))
+    print(json.dumps([{k: r.get(k) for k in ("outcome", "setpoint_gap_max_ms", "cpu_share_in_flight", "cpu_share",
+                                              "max_rss_mb")} for r in reports]))
     truth = json.loads(sim_out)
     assert truth["vehicles"] == 2 and truth["goal_reached"] and not truth["collided"], (truth["pairs"], sim_err[-1000:])
     assert truth["min_pair_clearance_m"] > 0.0
