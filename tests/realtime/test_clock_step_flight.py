@@ -27,8 +27,7 @@ from companion.offline.replay import replay
 from tests.support.fly_udp import fly_beside_mavsim, streamed_setpoints
 from tests.support.ports import free_udp_port
 
-pytestmark = [pytest.mark.realtime,
-              pytest.mark.quarantine(reason="new: clock steps in real time; not yet 20 of 20 in make flake-check")]
+pytestmark = pytest.mark.realtime
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "configs" / "antipodal.toml"

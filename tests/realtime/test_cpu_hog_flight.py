@@ -24,8 +24,7 @@ from companion.realtime.stream_priority import STREAM_FIFO_PRIORITY
 from tests.support.fly_udp import fly_beside_mavsim
 from tests.support.ports import free_udp_port
 
-pytestmark = [pytest.mark.realtime,
-              pytest.mark.quarantine(reason="new: fly beside CPU hogs; not yet 20 of 20 in make flake-check")]
+pytestmark = pytest.mark.realtime
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "configs" / "antipodal.toml"

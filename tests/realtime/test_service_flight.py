@@ -25,8 +25,7 @@ import pytest
 from tests.support.fly_udp import fly_beside_mavsim
 from tests.support.ports import free_udp_port
 
-pytestmark = [pytest.mark.realtime,
-              pytest.mark.quarantine(reason="new: fly under systemd's notify protocol; not yet 20 of 20 in make flake-check")]
+pytestmark = pytest.mark.realtime
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "configs" / "antipodal.toml"
