@@ -448,7 +448,7 @@ def _align_clocks(first_s: float, time_offset_s: float | None) -> tuple[float, b
 def _parse(path: Path, records: list, offset_us: int, companion_key: tuple[int, int]) -> _Parsed:
     """Inbound and outbound records in log order, each in link time (integer us), the marks
     taken out (a tick mark stays as a :class:`_TickMark` carrying its plan and signature
-    marks; a link mark goes to the next inbound record). Raises :class:`ReplayError` when
+    marks; a link mark goes to the next record, which is inbound whatever its source). Raises :class:`ReplayError` when
     no autopilot is among the inbound messages."""
     parser = DIALECT.MAVLink(None, *companion_key)
     parser.robust_parsing = True
@@ -461,7 +461,10 @@ def _parse(path: Path, records: list, offset_us: int, companion_key: tuple[int, 
         raw = bytes(msg.get_msgbuf())
         # mavutil stores stamp_us * 1e-6; rounding back recovers the integer exactly.
         rec = _Rec(int(round(t_s * _US)) - offset_us, _reparse(parser, raw, msg), raw)
-        out = messages.source_key(rec.msg) == key
+        # A record the recording marked as received on a link is inbound whatever its source:
+        # in a fleet, a peer's companion may send as the same (system, component) as ours on
+        # the autopilot link (every companion starts as (1, 191) there).
+        out = next_link is None and messages.source_key(rec.msg) == key
         mark = mark_of(rec.msg) if out else None
         if mark is not None:  # the recording's own notes (tlog_marks), never sent
             name, value = mark

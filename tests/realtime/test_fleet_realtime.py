@@ -5,12 +5,14 @@ companion flies its own vehicle, hears the traffic on its own obstacle port and 
 drone only on its fleet links (a ``udpin`` to hear, a ``udpout`` to the other's). Both must
 reach their goals with no collision in mavsim's truth (any pair, and each against the two
 crossing aircraft), the realised contour between the drones' estimates never below
-``c_min``, intents heard and used, and the 20 Hz stream without a gap over 150 ms. Every
-wait is bounded; every process is ended.
+``c_min``, intents heard and used, the 20 Hz stream without a gap over 150 ms, and each
+companion's tlog replayed exactly (the peer's announcements among its inbound messages).
+Every wait is bounded; every process is ended.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import signal
 import subprocess
@@ -19,10 +21,11 @@ from pathlib import Path
 
 import pytest
 
-from companion.commands._demo_fleet import free_port_run
-from companion.loop.config import read_scenario_toml
+from companion.loop.config import load_scenario, read_scenario_toml
+from companion.offline.replay import replay
 from companion.offline.campaign.toml_writer import to_toml
 from companion.offline.swap import rotated_fleet
+from tests.support.ports import free_port_run
 
 pytestmark = [pytest.mark.realtime, pytest.mark.quarantine(reason="new: fleets in real time; not yet 20 of 20 in make flake-check")]
 
@@ -89,3 +92,9 @@ def test_that_two_drones_swap_in_real_time_knowing_each_other_only_by_their_anno
         assert fleet["sent"]["states"] > 50 and fleet["sent"]["intents"] > 5
         assert fleet["min_peer_realised_contour"] >= r["c_min"], fleet
         assert r["setpoint_gap_max_ms"] <= 150.0, r["setpoint_gap_max_detail"]
+    for i, path in enumerate(files):  # each companion's log replays exactly, the peer's announcements included
+        offboard = dataclasses.replace(load_scenario(path).offboard, hold_after_goal_s=1.0)  # --exit-after-goal 1.0
+        res = replay(tmp_path / f"{i}.tlog", path, offboard=offboard)
+        assert any("fleet" in note for note in res.notes), res.notes
+        assert res.commands_compared == res.commands_recorded > 100, (i, res.commands_compared, res.commands_recorded)
+        assert res.max_abs_diff_mps == 0.0 and res.unmatched_commands == 0, (i, res.max_abs_diff_mps, res.unmatched_commands)
