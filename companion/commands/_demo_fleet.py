@@ -14,13 +14,13 @@ from __future__ import annotations
 import argparse
 import json
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from companion.commands._loopback import free_port_run, udp_port_taken
 from companion.errors import ConfigError
 
 #: Seconds a fly may take to start listening.
@@ -76,38 +76,6 @@ def _lockstep(drones: list[dict], args: argparse.Namespace) -> dict:
     summary["coordination"] = first.fleet.coordination
     summary["c_min"] = first.planner.c_min
     return summary
-
-
-def free_port_run(n: int) -> int:
-    """A loopback UDP port p with p .. p+n-1 free now (mavsim shifts vehicle i's ports by i)."""
-    for _ in range(100):
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            s.bind(("127.0.0.1", 0))
-            base = int(s.getsockname()[1])
-        if base + n > 65535:
-            continue
-        socks: list[socket.socket] = []
-        try:
-            for k in range(n):
-                sk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                socks.append(sk)
-                sk.bind(("127.0.0.1", base + k))
-            return base
-        except OSError:
-            continue
-        finally:
-            for sk in socks:
-                sk.close()
-    raise ConfigError(f"no run of {n} free loopback UDP ports")
-
-
-def _listening(port: int) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        try:
-            s.bind(("127.0.0.1", port))
-        except OSError:
-            return True
-    return False
 
 
 def _stop(proc: subprocess.Popen, timeout_s: float = 15.0) -> tuple[str, str]:
@@ -167,7 +135,7 @@ def _realtime(scenario: Path, drones: list[dict], args: argparse.Namespace, out:
             cmd += _signing_flags(args)
             flies.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
         deadline = time.monotonic() + FLY_START_S
-        while time.monotonic() < deadline and not all(_listening(obstacle + i) or f.poll() is not None
+        while time.monotonic() < deadline and not all(udp_port_taken(obstacle + i) or f.poll() is not None
                                                       for i, f in enumerate(flies)):
             time.sleep(0.05)
         sim_cmd = [sys.executable, "-m", "mavsim.cli", "--scenario", str(scenario), "--vehicles", str(n), "--no-gcs",

@@ -5,13 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import signal
-import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import NamedTuple
 
+from companion.commands._loopback import free_udp_port, wait_for_udp_listener
 from companion.commands._argtypes import integer_at_least, positive_number, scenario_file, seed
 from companion.commands._view import add_view_arguments, open_view
 from companion.errors import ConfigError
@@ -52,12 +52,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --drones: how the drones use each other's announced plans (default: the scenario's [fleet])")
     add_view_arguments(p)
     p.set_defaults(func=run)
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -168,18 +162,6 @@ _FLY_START_S = 60.0
 _PORT_ATTEMPTS = 3  # fly started on fresh ports when one picked as free was taken meanwhile
 
 
-def _wait_for_listener(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
-    """Wait (bounded) until a process has bound UDP ``port`` on loopback, or has exited."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and proc.poll() is None:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            try:
-                s.bind(("127.0.0.1", port))
-            except OSError:
-                return  # taken: fly is listening
-        time.sleep(0.05)
-
-
 def _crowd(scenario: Path, n: int, seed: int, target_port: int, clock_port: int):
     """Start ``n`` stationary systems beside the scenario's route (see :mod:`companion.offline.crowd`)."""
     import tomllib
@@ -206,7 +188,7 @@ class _Ports(NamedTuple):
 
     @classmethod
     def pick(cls) -> "_Ports":
-        return cls(*(_free_udp_port() for _ in cls._fields))
+        return cls(*(free_udp_port() for _ in cls._fields))
 
 
 def _start_fly(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None, ports: _Ports,
@@ -244,8 +226,8 @@ def _start_fly(scenario: Path, args: argparse.Namespace, overrides: dict, out: P
             sim_cmd += [flag, value]
             fly_cmd += [flag, value]
     fly = subprocess.Popen(fly_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    _wait_for_listener(api_port, fly, _FLY_START_S)
-    _wait_for_listener(obstacle_port, fly, _FLY_START_S)  # opened right after the autopilot link
+    wait_for_udp_listener(api_port, fly, _FLY_START_S)
+    wait_for_udp_listener(obstacle_port, fly, _FLY_START_S)  # opened right after the autopilot link
     return fly, sim_cmd
 
 

@@ -40,7 +40,8 @@ import numpy as np
 
 from mavsim.scenario import load_scenario
 from tests.ardupilot.ground import Ground
-from tests.ardupilot.sitl import REPO, CentredSticks, Sitl, free_instance, free_udp_port
+from tests.ardupilot.sitl import REPO, CentredSticks, Sitl, free_instance
+from tests.support.ports import free_udp_port
 
 logger = logging.getLogger(__name__)
 

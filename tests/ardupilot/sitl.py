@@ -23,6 +23,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from tests.support.ports import udp_port_taken
+
 logger = logging.getLogger(__name__)
 
 REPO = Path(__file__).resolve().parents[2]
@@ -72,17 +74,6 @@ def available() -> bool:
     return _script() is not None and build_dir() is not None
 
 
-def _udp_free(port: int) -> bool:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        s.bind(("127.0.0.1", port))
-        return True
-    except OSError:
-        return False
-    finally:
-        s.close()
-
-
 def _tcp_free(port: int) -> bool:
     s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     try:
@@ -98,18 +89,10 @@ def free_instance() -> int:
     """The first instance N >= :data:`FIRST_INSTANCE` whose UDP ports 14540+N, 14550+N and RC 5501+10N
     and TCP 5762+10N are free."""
     for n in range(FIRST_INSTANCE, 10):
-        if all(_udp_free(p) for p in (14540 + n, 14550 + n, 5501 + 10 * n)) and _tcp_free(5762 + 10 * n):
+        if all(not udp_port_taken(p) for p in (14540 + n, 14550 + n, 5501 + 10 * n)) and _tcp_free(5762 + 10 * n):
             return n
     raise RuntimeError(f"no free ArduCopter SITL instance ({FIRST_INSTANCE}..9): ports 1454{FIRST_INSTANCE}..14549 / "
                        f"1455{FIRST_INSTANCE}..14559 in use")
-
-
-def free_udp_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 class CentredSticks:

@@ -71,8 +71,8 @@ def test_that_a_port_taken_between_its_pick_and_flys_bind_gets_fresh_ports_not_a
     squatter.bind(("127.0.0.1", 0))
     taken = squatter.getsockname()[1]
     picks = iter([taken])  # the first pick, the autopilot port, is already someone else's
-    real_pick = demo._free_udp_port
-    monkeypatch.setattr(demo, "_free_udp_port", lambda: next(picks, None) or real_pick())
+    real_pick = demo.free_udp_port
+    monkeypatch.setattr(demo, "free_udp_port", lambda: next(picks, None) or real_pick())
     try:
         assert main(["demo", SCENARIO, "--realtime", "--json"]) == 0
     finally:

@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import os
 import shutil
-import socket
 import subprocess
-import time
 from pathlib import Path
+
+from tests.support.ports import wait_for_udp_listener
 
 ROOT = Path(__file__).resolve().parents[2]
 VENV_MAVPROXY = ROOT / "out" / "mavproxy-venv" / "bin" / "mavproxy.py"
@@ -32,16 +32,6 @@ def find_mavproxy() -> str | None:
     if given:
         return given
     return shutil.which("mavproxy.py") or (str(VENV_MAVPROXY) if VENV_MAVPROXY.exists() else None)
-
-
-def _bound(port: int) -> bool:
-    """Whether something holds UDP ``127.0.0.1:port``."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        try:
-            s.bind(("127.0.0.1", port))
-        except OSError:
-            return True
-    return False
 
 
 class MavProxy:
@@ -69,10 +59,7 @@ class MavProxy:
         with open(self.log, "wb") as out:
             self.proc = subprocess.Popen(self.command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                          start_new_session=True)
-        deadline = time.monotonic() + START_S
-        while time.monotonic() < deadline and self.proc.poll() is None and not _bound(self.master_port):
-            time.sleep(0.05)
-        if not _bound(self.master_port):
+        if not wait_for_udp_listener(self.master_port, self.proc, START_S):
             self.stop()
             raise RuntimeError(f"MAVProxy did not bind udp 127.0.0.1:{self.master_port} within {START_S:.0f} s: "
                                f"{self.output()[-2000:]}")

@@ -1,12 +1,8 @@
-"""Loopback ports for tests that open real sockets."""
+"""Loopback ports for tests that open real sockets: the helpers the commands use
+(:mod:`companion.commands._loopback`), so tests and demos pick and probe ports alike."""
 
 from __future__ import annotations
 
-import socket
+from companion.commands._loopback import free_port_run, free_udp_port, udp_port_taken, wait_for_udp_listener
 
-
-def free_udp_port() -> int:
-    """A loopback UDP port free at the time of asking (bind one, read its number, close it)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+__all__ = ["free_udp_port", "free_port_run", "udp_port_taken", "wait_for_udp_listener"]
