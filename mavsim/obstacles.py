@@ -143,6 +143,9 @@ class ObstacleSystem:
         self.transport, self.message = ob.transport, ob.message
         self.icao = ob.icao_address if ob.icao_address is not None else 0xA00000 + sysid
         self.origin = origin
+        #: where the frame of local reports (ODOMETRY, LOCAL_POSITION_NED) lies in the obstacle's
+        #: frame (NED m): the receiver's frame when its origin is not the scenario's (a fleet)
+        self.local_offset_m = np.zeros(3)
         self.geoid_separation_m = float(geoid_separation_m)
         self.track = ObstacleTrack(ob)
         self.rng = rng
@@ -205,6 +208,8 @@ class ObstacleSystem:
         if self.transport == "adsb":
             return [(AUTOPILOT_ALL_LINKS, self._adsb(p, v, truncate=True)), (OWN_API_LINK, self._adsb(p, v, truncate=False))]
         garbage = self.message in ("ODOMETRY", "LOCAL_POSITION_NED") and self._garbage_due(now_us)
+        if self.message in ("ODOMETRY", "LOCAL_POSITION_NED"):
+            p = p - self.local_offset_m
         if self.message == "ODOMETRY":
             stamp = 0xFFFFFFFF if garbage else round(clock * 1e6) % (1 << 64)
             return [(own, odometry_message(stamp, p, v, [1.0, 0.0, 0.0, 0.0], (_NAN, _NAN, _NAN),

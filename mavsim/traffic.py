@@ -28,6 +28,12 @@ ground station on the autopilot's GCS link (PX4 SITL: it sends to 14550, listens
 
 Frames and units: local NED metres of the autopilot (its EKF origin, z down), seconds of
 the player's monotonic clock since it started (``t_s``) and since engagement (``motion_s``).
+A fleet's vehicles each have their own EKF origin; there the scenario's frame is anchored at
+``frame_origin`` (one geodetic point for the whole fleet) instead: obstacles are placed,
+truth and estimates recorded and refereed in that frame, and reports in a local frame
+(ODOMETRY, LOCAL_POSITION_NED on the obstacle link) are shifted into the vehicle's own frame
+once its origin is known (held until then). With ``start = "manual"`` the motion starts when
+:meth:`TrafficPlayer.engage` is called (one start for several players).
 """
 
 from __future__ import annotations
@@ -123,11 +129,14 @@ class TrafficPlayer:
     autopilot : str
         The autopilot's kind, a personality in :data:`mavsim.personalities.PERSONALITIES`:
         it names the HEARTBEAT's modes and says when the vehicle is engaged.
+    frame_origin : (lat deg, lon deg, alt m AMSL) or None
+        Where the scenario's NED frame is anchored; None: at the autopilot's own origin.
     """
 
     def __init__(self, scenario: Scenario, links: PlayerLinks = PlayerLinks(), seed: int = 0,
                  start: str = "offboard", record: str | Path | None = None, keep_samples: bool = False,
-                 autopilot: str = DEFAULT_PERSONALITY) -> None:
+                 autopilot: str = DEFAULT_PERSONALITY,
+                 frame_origin: tuple[float, float, float] | None = None) -> None:
         self.personality = get_personality(autopilot)
         if not scenario.obstacles:
             raise ScenarioError(f"{scenario.source}: no [[world.obstacles]] to play")
@@ -135,8 +144,8 @@ class TrafficPlayer:
             if ob.transport == "api":
                 raise ScenarioError(f"{scenario.source}: obstacle {ob.name!r}: transport = \"api\" cannot be played "
                                     "into a real autopilot (PX4 may fuse ODOMETRY as its own vision); use \"link\" or \"adsb\"")
-        if start not in ("offboard", "now"):
-            raise SimulationError(f"start must be 'offboard' or 'now', got {start!r}")
+        if start not in ("offboard", "now", "manual"):
+            raise SimulationError(f"start must be 'offboard', 'now' or 'manual', got {start!r}")
         self.scenario, self.links, self.start = scenario, links, start
         seeds = np.random.SeedSequence(int(seed)).spawn(len(scenario.obstacles))
         self.systems = [ObstacleSystem(ob, scenario.obstacle_sysid_base + i, scenario.obstacle_compid,
@@ -158,6 +167,12 @@ class TrafficPlayer:
         self.autopilot: tuple[int, int] | None = None
         self.origin: tuple[float, float, float] | None = None   # (lat deg, lon deg, alt m AMSL)
         self.origin_source: str | None = None
+        self.frame_origin = None if frame_origin is None else tuple(float(x) for x in frame_origin)
+        #: the vehicle's origin in the scenario's frame (NED m); zero without a frame_origin
+        self.vehicle_offset_m: np.ndarray | None = None if frame_origin is not None else np.zeros(3)
+        if self.frame_origin is not None:
+            for system in self.systems:
+                system.origin = self.frame_origin
         self._home: tuple[float, float, float, float, float, float] | None = None
         self._home_since: float | None = None
         self.engaged_t_s: float | None = 0.0 if start == "now" else None
@@ -179,6 +194,13 @@ class TrafficPlayer:
     def now_s(self) -> float:
         """Seconds since the player started (monotonic)."""
         return time.monotonic() - self.t0
+
+    def engage(self, t_s: float | None = None) -> None:
+        """Start the scripted motion at ``t_s`` (player clock, s; default now), once; for
+        ``start = "manual"``, when several players must move their obstacles together."""
+        if self.engaged_t_s is None:
+            self.engaged_t_s = self.now_s() if t_s is None else float(t_s)
+            logger.info("t=%.2f engaged from outside: obstacles start moving", self.engaged_t_s)
 
     def motion_s(self, t_s: float) -> float:
         """Time on the obstacles' tracks at ``t_s`` (s; 0 before engagement)."""
@@ -225,6 +247,8 @@ class TrafficPlayer:
             for route, msg in system.due(now_us, motion):
                 if route == OWN_OBSTACLE_LINK and self.origin is None and system.message in _GEODETIC:
                     self.stats["geodetic_held_no_origin"] += 1
+                elif route == OWN_OBSTACLE_LINK and self.vehicle_offset_m is None:
+                    self.stats["local_held_no_origin"] += 1   # no place in the vehicle's frame yet
                 elif route == OWN_OBSTACLE_LINK:
                     self._send(self.out, obstacle_addr, system.sysid, system.compid, msg, "obstacle_link_sent")
                 elif route == OWN_API_LINK and system.transport == "adsb":
@@ -237,8 +261,13 @@ class TrafficPlayer:
     # ------------------------------------------------------------------ receiving
     def _set_origin(self, origin: tuple[float, float, float], source: str, t_s: float) -> None:
         self.origin, self.origin_source = origin, source
-        for system in self.systems:
-            system.origin = origin
+        if self.frame_origin is None:
+            for system in self.systems:
+                system.origin = origin
+        else:
+            self.vehicle_offset_m = np.array(global_to_ned(*origin, *self.frame_origin))
+            for system in self.systems:
+                system.local_offset_m = self.vehicle_offset_m
         logger.info("t=%.2f origin %.7f %.7f %.2f m from %s", t_s, *origin, source)
 
     def _receive(self, t_s: float) -> None:
@@ -277,7 +306,7 @@ class TrafficPlayer:
             if mode != self.mode:
                 self.mode = mode
                 self.mode_changes.append((round(t_s, 3), mode))
-            if self.engaged_t_s is None and self.personality.engaged(msg.base_mode, msg.custom_mode):
+            if self.engaged_t_s is None and self.start == "offboard" and self.personality.engaged(msg.base_mode, msg.custom_mode):
                 self.engaged_t_s = t_s
                 logger.info("t=%.2f engaged (armed in OFFBOARD): obstacles start moving", t_s)
             return
@@ -289,7 +318,9 @@ class TrafficPlayer:
             self._home = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3, msg.x, msg.y, msg.z)
             self._home_since = t_s
         elif kind == "LOCAL_POSITION_NED":
-            self._last_estimate = np.array([msg.x, msg.y, msg.z], float)
+            if self.vehicle_offset_m is None:
+                return   # the vehicle's frame is not placed in the scenario's yet
+            self._last_estimate = np.array([msg.x, msg.y, msg.z], float) + self.vehicle_offset_m
             if self.samples is not None:
                 self.samples["estimate"].append((t_s, self._last_estimate, msg.time_boot_ms * 1e-3))
             if self.engaged_t_s is not None:
@@ -298,9 +329,10 @@ class TrafficPlayer:
             self.texts.append((round(t_s, 3), str(msg.text).strip()))
 
     def _on_truth(self, t_s: float, msg) -> None:
-        if msg.get_type() != "HIL_STATE_QUATERNION" or self.origin is None:
+        frame = self.frame_origin or self.origin
+        if msg.get_type() != "HIL_STATE_QUATERNION" or frame is None:
             return
-        self._last_truth = np.array(global_to_ned(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, *self.origin))
+        self._last_truth = np.array(global_to_ned(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, *frame))
         if self.samples is not None:
             self.samples["truth"].append((t_s, self._last_truth))
         if self.engaged_t_s is not None:
@@ -352,6 +384,8 @@ class TrafficPlayer:
             "autopilot": None if self.autopilot is None else {"system": self.autopilot[0], "component": self.autopilot[1]},
             "origin": None if self.origin is None else {"lat_deg": self.origin[0], "lon_deg": self.origin[1],
                                                         "alt_m": self.origin[2], "from": self.origin_source},
+            "frame_origin": None if self.frame_origin is None else dict(zip(("lat_deg", "lon_deg", "alt_m"), self.frame_origin)),
+            "vehicle_offset_m": None if self.vehicle_offset_m is None else [round(float(x), 3) for x in self.vehicle_offset_m],
             "engaged": self.engaged_t_s is not None,
             "engaged_at_s": None if self.engaged_t_s is None else round(self.engaged_t_s, 3),
             "obstacles": [{"name": s.name, "system": s.sysid, "transport": s.transport,

@@ -166,6 +166,45 @@ def test_that_the_player_plays_adsb_about_the_autopilots_origin_and_starts_the_o
         obstacle_link.close()
 
 
+
+def test_that_with_a_frame_origin_a_fleets_player_places_everything_in_the_fleets_frame():
+    """A fleet's vehicle whose EKF origin lies 12 m north and 3 m west of the fleet's frame
+    origin: ADS-B about the frame origin, the link obstacle's local reports shifted into the
+    vehicle's frame (held until its origin is known), truth and estimate in the fleet's frame,
+    and the motion waiting for :meth:`engage` ("manual") although the vehicle is in OFFBOARD."""
+    frame = ned_to_global(-12.0, 3.0, 0.0, *ORIGIN)   # the vehicle's origin is (12, -3, 0) in the frame
+    px4, obstacle_link = FakePx4(), _listener()
+    links = PlayerLinks(gcs_local_port=free_udp_port(), autopilot_port=px4.port,
+                        obstacle_port=obstacle_link.getsockname()[1], truth_port=free_udp_port())
+    try:
+        with TrafficPlayer(_scenario(), links, start="manual", frame_origin=frame, keep_samples=True) as player:
+            for _ in range(20):     # no answer from the autopilot yet: its origin is unknown
+                player.step()
+                time.sleep(0.01)
+            assert player.stats["local_held_no_origin"] > 0 and not _drain(obstacle_link)
+            _run(player, px4, 1.5, mode=OFFBOARD_ARMED, truth=(0.0, 0.0, -5.0))   # truth: the vehicle's frame
+            assert player.engaged_t_s is None                  # OFFBOARD, but the start is the caller's
+            assert player.vehicle_offset_m == pytest.approx([12.0, -3.0, 0.0], abs=1e-3)
+            adsb = [m for m in px4.received if m.get_type() == "ADSB_VEHICLE"][-1]
+            north, east, down = global_to_ned(adsb.lat * 1e-7, adsb.lon * 1e-7, adsb.altitude * 1e-3, *frame)
+            assert (north, east, down) == pytest.approx((10.0, 5.0, -5.0), abs=0.02)   # the scenario's point
+            link = [m for m in _drain(obstacle_link) if m.get_type() == "LOCAL_POSITION_NED"][-1]
+            assert (link.x, link.y, link.z) == pytest.approx((-12.0, 11.0, -5.0), abs=1e-4)   # (0, 8, -5) less the offset
+            _, truth = player.samples["truth"][-1]
+            assert truth == pytest.approx([12.0, -3.0, -5.0], abs=0.02)
+            player.engage()
+            engaged = player.engaged_t_s
+            _run(player, px4, 0.5, mode=OFFBOARD_ARMED, truth=(0.0, 0.0, -5.0))
+            assert player.engaged_t_s == engaged and player.motion_s(player.now_s()) > 0.4
+            summary = json.loads(json.dumps(player.summary()))
+        assert summary["frame_origin"]["lat_deg"] == pytest.approx(frame[0])
+        assert summary["vehicle_offset_m"] == pytest.approx([12.0, -3.0, 0.0], abs=1e-3)
+        # the link obstacle (0, 8, -5) in the frame, the vehicle at (12, -3, -5): refereed in the frame
+        assert summary["referee"]["truth"]["obstacles"][1]["min_distance_m"] == pytest.approx(math.hypot(12.0, 11.0), abs=0.6)
+    finally:
+        px4.close()
+        obstacle_link.close()
+
 def _traffic(*args: str, **kw) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "mavsim", "traffic", *args], capture_output=True, text=True,
                           timeout=60, **kw)

@@ -4,14 +4,23 @@ The build is found at ``PX4_SITL_DIR`` or ``../shared/px4-sitl`` from the reposi
 root; its ``start-sih WORK_DIR`` script starts PX4 as a daemon and prints its PID.
 Ports are PX4's: offboard link 14580 -> 14540, ground station 18570 -> 14550, SIH
 ground truth (HIL_STATE_QUATERNION) 19450 -> 19410.
+
+A fleet runs several instances side by side (``Sitl(..., instance=i, home=(lat, lon, alt))``):
+PX4's ``-i i`` shifts those ports by ``i`` (the ground station's 14550 stays), gives the
+vehicle system id ``i + 1``, and SIH starts the vehicle at ``home`` (``PX4_HOME_LAT`` /
+``_LON`` / ``_ALT``), so each vehicle has its own EKF origin there. ``start-sih`` takes no
+instance, so an instance is started as it does (the same environment and parameters),
+with PX4's own ``-i``.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import shutil
 import signal
 import subprocess
+import tarfile
 import time
 from pathlib import Path
 
@@ -62,10 +71,15 @@ class Sitl:
         PX4 parameters to set at boot (name -> value); default :data:`PARAMS`.
     boot_timeout_s : float
         Seconds to wait for "Ready for takeoff!" in the console log.
+    instance : int
+        PX4's instance (``px4 -i``): ports shifted by it, system id ``instance + 1``.
+    home : (lat deg, lon deg, alt m AMSL), optional
+        Where SIH starts the vehicle (default: PX4's, 47.397742, 8.545594, 488).
     """
 
     def __init__(self, work_dir: str | os.PathLike, boot_timeout_s: float = 60.0,
-                 params: dict[str, float] | None = None) -> None:
+                 params: dict[str, float] | None = None, instance: int = 0,
+                 home: tuple[float, float, float] | None = None) -> None:
         base = sitl_dir()
         if base is None:
             raise RuntimeError("no PX4 SITL build: set PX4_SITL_DIR or put one at ../shared/px4-sitl")
@@ -73,13 +87,31 @@ class Sitl:
         self.work_dir = Path(work_dir)
         self.boot_timeout_s = boot_timeout_s
         self.params = dict(PARAMS if params is None else params)
+        self.instance, self.home = int(instance), home
         self.pid: int | None = None
+        self._proc: subprocess.Popen | None = None   # an instance started here: this process reaps it
+
+    @property
+    def offboard_port(self) -> int:
+        """Where PX4's offboard (API) link sends: the companion listens here."""
+        return 14540 + self.instance
+
+    @property
+    def gcs_port(self) -> int:
+        """PX4's ground-station link (it answers whoever sends to it)."""
+        return 18570 + self.instance
+
+    @property
+    def truth_port(self) -> int:
+        """Where SIH's ground truth (HIL_STATE_QUATERNION) is sent."""
+        return 19410 + self.instance
 
     def __enter__(self) -> Sitl:
         env = {**os.environ, **{f"PX4_PARAM_{name}": str(value) for name, value in self.params.items()}}
-        out = subprocess.run([str(self.script), str(self.work_dir)], check=True, capture_output=True, text=True,
-                             timeout=120, env=env, preexec_fn=raise_priority)
-        self.pid = int(out.stdout.strip().splitlines()[-1])
+        if self.home is not None:
+            env.update(PX4_HOME_LAT=repr(float(self.home[0])), PX4_HOME_LON=repr(float(self.home[1])),
+                       PX4_HOME_ALT=repr(float(self.home[2])))
+        self.pid = self._start_sih(env) if self.instance == 0 else self._start_instance(env)
         logger.info("PX4 SITL started, pid %d, in %s", self.pid, self.work_dir)
         deadline = time.monotonic() + self.boot_timeout_s
         log = self.work_dir / "px4.log"
@@ -93,9 +125,36 @@ class Sitl:
         self.stop()
         raise RuntimeError(f"PX4 SITL not ready after {self.boot_timeout_s:.0f} s; see {log}")
 
+    def _start_sih(self, env: dict) -> int:
+        out = subprocess.run([str(self.script), str(self.work_dir)], check=True, capture_output=True, text=True,
+                             timeout=120, env=env, preexec_fn=raise_priority)
+        return int(out.stdout.strip().splitlines()[-1])
+
+    def _start_instance(self, env: dict) -> int:
+        """What ``start-sih`` does, with ``-i``: a fresh directory, the build unpacked, PX4 as a daemon."""
+        shutil.rmtree(self.work_dir, ignore_errors=True)
+        (self.work_dir / "run").mkdir(parents=True)
+        with tarfile.open(self.script.parent / "px4-sitl.tar.gz") as tar:
+            tar.extractall(self.work_dir, filter="fully_trusted")
+        env = {**env, "PX4_SYS_AUTOSTART": "10040", "PX4_SIM_MODEL": "sihsim_quadx", "PX4_SIMULATOR": "sihsim"}
+        env.setdefault("PX4_PARAM_COM_RC_IN_MODE", "4")
+        env.setdefault("PX4_PARAM_COM_RCL_EXCEPT", "4")
+        build = self.work_dir / "px4-sitl"
+        with open(self.work_dir / "px4.log", "wb") as log:
+            proc = subprocess.Popen([str(build / "bin" / "px4"), "-i", str(self.instance), "-d", "-w",
+                                     str(self.work_dir / "run"), str(build / "etc")],
+                                    cwd=self.work_dir / "run", env=env, stdout=log, stderr=subprocess.STDOUT,
+                                    stdin=subprocess.DEVNULL, start_new_session=True,
+                                    preexec_fn=raise_priority)
+        (self.work_dir / "px4.pid").write_text(f"{proc.pid}\n")
+        self._proc = proc
+        return proc.pid
+
     def alive(self) -> bool:
         if self.pid is None:
             return False
+        if self._proc is not None:
+            return self._proc.poll() is None
         try:
             os.kill(self.pid, 0)
         except ProcessLookupError:
@@ -114,6 +173,11 @@ class Sitl:
                 return
             deadline = time.monotonic() + wait_s
             while time.monotonic() < deadline:
+                if self._proc is not None:
+                    if self._proc.poll() is not None:
+                        return
+                    time.sleep(0.1)
+                    continue
                 try:
                     os.kill(pid, 0)
                 except ProcessLookupError:
