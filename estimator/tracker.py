@@ -76,6 +76,8 @@ class ObstacleTracker:
         vel: np.ndarray | None = None,
         pos_cov: np.ndarray | None = None,
         vel_cov: np.ndarray | None = None,
+        *,
+        estimate: bool = False,
     ) -> UpdateResult:
         """Fuse one obstacle report, creating the track on its first.
 
@@ -96,17 +98,24 @@ class ObstacleTracker:
             NaN (unknown) uses the configured noise; any other non-finite,
             asymmetric or not positive definite covariance rejects the report.
 
+        estimate : bool
+            The report is an estimate already filtered by its sender (a fleet peer's own
+            estimate, mean and covariance), not a measurement: a track created by such a
+            report takes each report as its state (``"adopted"``) and only predicts between
+            them, instead of fusing them with a constant-velocity model that lags a
+            manoeuvring sender. Read when the track is created; later reports follow it.
+
         Returns
         -------
         UpdateResult
             ``reason`` is ``"gated"`` when the normalised innovation squared exceeds
             ``chi2.ppf(gate_probability, dof)``.
         """
-        result = self._update(key, t_s, pos, vel, pos_cov, vel_cov)
+        result = self._update(key, t_s, pos, vel, pos_cov, vel_cov, estimate)
         self._counts[result.reason] += 1
         return result
 
-    def _update(self, key, t_s, pos, vel, pos_cov, vel_cov) -> UpdateResult:
+    def _update(self, key, t_s, pos, vel, pos_cov, vel_cov, estimate: bool = False) -> UpdateResult:
         cfg = self.config
         try:
             if not math.isfinite(t_s):
@@ -127,7 +136,8 @@ class ObstacleTracker:
                 reinit_gap_s=cfg.reinit_gap_s,
                 gate_thresholds=self.gate_thresholds,
                 label=f"track {key!r}",
-                report_correlation_s=cfg.report_correlation_s,
+                adopt_reports=bool(estimate),
+                report_correlation_s=0.0 if estimate else cfg.report_correlation_s,
             )
             self._tracks[key] = track
             self._counts["tracks_created"] += 1

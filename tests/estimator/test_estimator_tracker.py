@@ -211,3 +211,29 @@ def test_that_track_covariance_stays_symmetric_positive_definite_for_any_valid_r
         np.linalg.cholesky(cov)
     _, covs = tr.predict(KEY, t + 0.3 * np.arange(1, 11))
     np.linalg.cholesky(covs)
+
+
+def test_that_a_track_of_estimates_takes_the_senders_corrections_where_measurements_lag():
+    """A fleet peer announces its own estimate, which its autopilot corrects now and then
+    (here 0.5 m north at 1.5 s while it flies east at 1 m/s). Fused as measurements by a
+    filter tuned for straight-flying traffic (PSD 0.01) the track takes the correction in
+    slowly; adopted, the track is the announcement (mean and covariance) and only predicts
+    between announcements."""
+    cfg = TrackerConfig(accel_noise_psd_m2ps3=0.01)
+    fused, adopted = ObstacleTracker(cfg), ObstacleTracker(cfg)
+    cov_p, cov_v = 0.01 * np.eye(3), 0.004 * np.eye(3)
+    v = np.array([0.0, 1.0, 0.0])
+    for k in range(31):   # 3 s at 10 Hz
+        t = 0.1 * k
+        p = np.array([0.5 if t >= 1.5 else 0.0, t, -5.0])
+        assert fused.update(KEY, t, p, v, cov_p, cov_v).accepted
+        result = adopted.update(KEY, t, p, v, cov_p, cov_v, estimate=True)
+        assert result.accepted and result.reason == ("initialised" if k == 0 else "adopted")
+    lag = np.linalg.norm(fused.state(KEY).mean[:3] - p)
+    assert lag > 0.1, lag                                       # 1.5 s on, a third of the correction is missing
+    state = adopted.state(KEY)
+    assert np.allclose(state.mean[:3], p) and np.allclose(state.mean[3:], v)
+    assert np.allclose(state.cov[:3, :3], cov_p) and np.allclose(state.cov[3:, 3:], cov_v)
+    assert adopted.stats.adopted == 30 and adopted.stats.updated == 0
+    mean, _ = adopted.predict(KEY, np.array([3.5]))
+    assert np.allclose(mean[0], p + 0.5 * v)                   # between announcements: constant velocity

@@ -7,6 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
+from companion.errors import ConfigError
 from companion.loop.fleet_announcer import FleetAnnouncer
 from companion.loop.fleet_config import FleetConfig
 from companion.loop.intake.obstacles import ObstacleIntake
@@ -151,3 +152,35 @@ def test_that_positions_cross_the_fleet_link_in_the_fleets_frame():
     key = (PEER_SYS, 191, "fleet")
     assert np.allclose(it.tracker.state(key).position, [1.0, 0.0, -5.0])
     assert np.allclose(peers.fresh(key, 100.0).positions, [[1.0, 0.0, -5.0]])
+
+
+def test_that_a_peers_announced_estimate_is_its_track_state_unless_configured_as_measurements():
+    """A peer on the fleet link announces its companion's estimate, which its autopilot
+    corrects now and then (0.5 m north at 1.5 s here). Taken as the track's state
+    (``[fleet] peer_reports = "estimate"``) the track is the announcement; ``"measurements"``
+    (the default) fuses it like an obstacle's reports and takes the correction in slowly.
+    An obstacle link's ODOMETRY stays a measurement either way."""
+    def fly(peer_reports, link):
+        peers = PeerIntents(FleetConfig(peer_reports=peer_reports), own_system=1)
+        it = ObstacleIntake(TrafficConfig(), ObstacleTracker(TrackerConfig(accel_noise_psd_m2ps3=0.01)),
+                            lambda t: t - 100.0, 0.5, peers=peers)
+        for k in range(31):   # east at 1 m/s
+            t = 200.0 + 0.1 * k
+            north = 0.5 if k >= 15 else 0.0
+            it.claims(_rx(fleet.encode_state(_peer_clock(t), [north, 0.1 * k, -5.0], [0.0, 1.0, 0.0],
+                                             0.01 * np.eye(3), 0.004 * np.eye(3)), t, link=link), AP)
+        key = (PEER_SYS, 191, link)
+        return it.tracker.state(key).position, it.tracker.stats
+    announced = np.array([0.5, 3.0, -5.0])
+    position, stats = fly("estimate", "fleet")
+    assert np.allclose(position, announced, atol=1e-4) and stats.adopted == 30
+    for peer_reports, link in (("measurements", "fleet"), ("estimate", "obstacles1")):
+        position, stats = fly(peer_reports, link)
+        assert stats.adopted == 0 and np.linalg.norm(position - announced) > 0.1, (peer_reports, link, position)
+    assert FleetConfig().peer_reports == "measurements"
+    try:
+        FleetConfig(peer_reports="guess")
+    except ConfigError as exc:
+        assert "peer_reports" in str(exc)
+    else:
+        raise AssertionError("peer_reports = 'guess' accepted")

@@ -50,16 +50,22 @@ def test_that_a_fleet_run_is_the_same_bits_for_the_same_seed():
     assert a == b
 
 
-def test_that_without_keeping_right_two_drones_that_reason_alike_dodge_the_same_way():
-    # the reciprocal dance: at constant velocity, with no rule of the road, both dodge west and
-    # down, again and again; the c_min promise between them breaks (measured: contour 0.0, they touch)
-    scenarios = swap_scenarios(2, traffic=False)
-    for s in scenarios:
-        s["fleet"] = {"keep_right": False}
-    danced = run_fleet_lockstep(scenarios, seed=0, coordination="decentralised").summary()
-    kept = run_fleet_lockstep(swap_scenarios(2, traffic=False), seed=0, coordination="decentralised").summary()
+def test_that_without_keeping_right_drones_that_filter_each_other_dodge_the_same_way_and_those_that_adopt_do_not():
+    # the reciprocal dance: with each peer's announced estimate fused as measurements by the
+    # tracker (which lags the peer's dodge) and no rule of the road, both dodge west and down,
+    # again and again; the c_min promise between them breaks (measured: contour 0.0, they touch).
+    # Taking the announcement as the peer's state ("estimate"), they pass without the rule.
+    def swap(keep_right, peer_reports):
+        scenarios = swap_scenarios(2, traffic=False)
+        for s in scenarios:
+            s["fleet"] = {"keep_right": keep_right, "peer_reports": peer_reports}
+        return run_fleet_lockstep(scenarios, seed=0, coordination="decentralised").summary()
+    danced, kept = swap(False, "measurements"), swap(True, "measurements")
     assert danced["min_peer_realised_contour"] < 0.9 <= kept["min_peer_realised_contour"]
     assert danced["time_to_all_goals_s"] > 1.5 * kept["time_to_all_goals_s"]
+    adopted = swap(False, "estimate")
+    assert not adopted["collided"] and adopted["min_peer_realised_contour"] >= 0.9
+    assert adopted["time_to_all_goals_s"] < 1.1 * kept["time_to_all_goals_s"]
 
 
 def test_that_a_peer_gone_silent_is_flown_around_at_constant_velocity_then_forgotten_once():

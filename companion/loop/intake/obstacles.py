@@ -261,7 +261,8 @@ class ObstacleIntake:
             if np.any(offset):
                 decoded = dataclasses.replace(decoded, position_ned=decoded.position_ned - offset)
         track = _track_key(link, decoded.identity)
-        self._fuse(track, source, decoded, policy, rx.t_s)
+        estimate = link == FLEET_LINK and (self.peers is None or self.peers.config.peer_reports == "estimate")
+        self._fuse(track, source, decoded, policy, rx.t_s, estimate=estimate)
 
     def _take_intent(self, rx: Received, link: str) -> None:
         """A peer's intent, placed on the vehicle's time base through its state announcements' clock.
@@ -311,7 +312,10 @@ class ObstacleIntake:
             self._last_adsb[icao] = now
         return False
 
-    def _fuse(self, track: Hashable, source: str, r: traffic.TrafficReport, policy: SourcePolicy, t_rx: float) -> None:
+    def _fuse(self, track: Hashable, source: str, r: traffic.TrafficReport, policy: SourcePolicy, t_rx: float,
+              estimate: bool = False) -> None:
+        """Put one report on the vehicle's time base and into the tracker (``estimate``: a fleet
+        peer's own estimate, taken as its track's state; :meth:`ObstacleTracker.update`)."""
         if r.stamp is None:
             t_link = t_rx - max(0.0, r.age_s)
         else:
@@ -342,7 +346,10 @@ class ObstacleIntake:
             if r.vertical_velocity_unknown:
                 vel_cov = vel_cov.copy()
                 vel_cov[2, 2] = max(vel_cov[2, 2], vel2)
-        result = self.tracker.update(track, t_v, r.position_ned, r.velocity_ned, pos_cov, vel_cov)
+        if estimate:
+            result = self.tracker.update(track, t_v, r.position_ned, r.velocity_ned, pos_cov, vel_cov, estimate=True)
+        else:
+            result = self.tracker.update(track, t_v, r.position_ned, r.velocity_ned, pos_cov, vel_cov)
         if not result.accepted:
             self._reject(source, f"tracker: {result.reason}", t_rx)
             return
