@@ -27,7 +27,7 @@ from companion.offline.campaign.toml_writer import to_toml
 from companion.offline.swap import rotated_fleet
 from tests.support.ports import free_port_run
 
-pytestmark = [pytest.mark.realtime, pytest.mark.quarantine(reason="new: fleets in real time; not yet 20 of 20 in make flake-check")]
+pytestmark = pytest.mark.realtime
 
 ROOT = Path(__file__).resolve().parents[2]
 SWAP = ROOT / "configs" / "swap.toml"
