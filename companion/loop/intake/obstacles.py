@@ -261,7 +261,7 @@ class ObstacleIntake:
             if np.any(offset):
                 decoded = dataclasses.replace(decoded, position_ned=decoded.position_ned - offset)
         track = _track_key(link, decoded.identity)
-        estimate = link == FLEET_LINK and (self.peers is None or self.peers.config.peer_reports == "estimate")
+        estimate = link == FLEET_LINK and self.peers is not None and self.peers.config.peer_reports == "estimate"
         self._fuse(track, source, decoded, policy, rx.t_s, estimate=estimate)
 
     def _take_intent(self, rx: Received, link: str) -> None:
@@ -346,10 +346,7 @@ class ObstacleIntake:
             if r.vertical_velocity_unknown:
                 vel_cov = vel_cov.copy()
                 vel_cov[2, 2] = max(vel_cov[2, 2], vel2)
-        if estimate:
-            result = self.tracker.update(track, t_v, r.position_ned, r.velocity_ned, pos_cov, vel_cov, estimate=True)
-        else:
-            result = self.tracker.update(track, t_v, r.position_ned, r.velocity_ned, pos_cov, vel_cov)
+        result = self.tracker.update(track, t_v, r.position_ned, r.velocity_ned, pos_cov, vel_cov, estimate=estimate)
         if not result.accepted:
             self._reject(source, f"tracker: {result.reason}", t_rx)
             return
