@@ -42,6 +42,7 @@ from mavsim.scenario import load_scenario
 from tests.ardupilot.ground import Ground
 from tests.ardupilot.sitl import REPO, CentredSticks, Sitl, free_instance
 from tests.support.ports import free_udp_port
+from tests.support.runs import fly_runs
 
 logger = logging.getLogger(__name__)
 
@@ -311,15 +312,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("extra", nargs="*", help="extra companion arguments (after --)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO)
-    results = []
-    for i in range(args.runs):
-        r = fly_once(Path(args.work) / f"run{i}", Path(args.scenario), seed=i, trouble=args.trouble, extra=tuple(args.extra),
-                     adsb=args.adsb)
-        r["failed"] = judge(r)
-        results.append(r)
-        print(json.dumps(r, indent=1, default=str), flush=True)
-    print("passed", sum(not r["failed"] for r in results), "of", len(results))
-    return 0 if all(not r["failed"] for r in results) else 1
+    return fly_runs(lambda i: fly_once(Path(args.work) / f"run{i}", Path(args.scenario), seed=i, trouble=args.trouble,
+                                       extra=tuple(args.extra), adsb=args.adsb), judge, args.runs)
 
 
 if __name__ == "__main__":

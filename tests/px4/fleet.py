@@ -45,22 +45,16 @@ from mavsim.fleet import pair_clearances
 from mavsim.geo import ned_to_global
 from mavsim.scenario import load_scenario
 from mavsim.traffic import PlayerLinks, TrafficPlayer
+from tests.px4.flight import COMPANION_TIMEOUT_S, HEARTBEAT_LAG_S, HOLD, HOLD_WATCH_S, TAKEOFF_ALT_M, \
+    clearance_in_control_and_after, companion_argv
 from tests.px4.sitl import REPO, Sitl, raise_priority
 from tests.support.ports import free_port_run, free_udp_port
+from tests.support.runs import fly_runs
 
 logger = logging.getLogger(__name__)
 
 SWAP_PX4 = REPO / "configs" / "swap_px4.toml"
-TAKEOFF_ALT_M = 5.0
-COMPANION_TIMEOUT_S = 150.0
-HOLD_WATCH_S = 4.0
-HEARTBEAT_LAG_S = 1.2     # the ground link's HEARTBEAT may show a mode up to this much after the companion's
 GOAL_WITHIN_S = 35.0      # each drone at its goal within this of its own OFFBOARD
-HOLD = "AUTO.LOITER"
-
-
-def _companion(*args: str) -> list[str]:
-    return [sys.executable, "-m", "companion.cli", *args]
 
 
 def plan_fleet(scenario: Path, n: int, work: Path) -> list[dict]:
@@ -85,9 +79,10 @@ def fly_fleet(work: Path, n: int = 3, scenario: Path = SWAP_PX4, seed: int = 0) 
     """One fleet flight; returns the figures (see the module docstring)."""
     work.mkdir(parents=True, exist_ok=True)
     drones = plan_fleet(scenario, n, work)
-    origin = tuple(float(x) for x in read_scenario_toml(scenario)["fleet"]["origin"])
+    data = read_scenario_toml(scenario)
+    origin = tuple(float(x) for x in data["fleet"]["origin"])
     fleet_base = free_port_run(n)
-    result: dict = {"work": str(work), "drones": n, "c_min": float(read_scenario_toml(scenario)["planner"]["c_min"])}
+    result: dict = {"work": str(work), "drones": n, "c_min": float(data["planner"]["c_min"])}
     nice_before = os.getpriority(os.PRIO_PROCESS, 0)
     raise_priority()   # the players' threads too: their truth stamps are wall-clock
     try:
@@ -106,7 +101,6 @@ def fly_fleet(work: Path, n: int = 3, scenario: Path = SWAP_PX4, seed: int = 0) 
             os.setpriority(os.PRIO_PROCESS, 0, nice_before)
         except OSError:
             pass
-    result["ok"] = not judge(result)
     return result
 
 
@@ -142,7 +136,7 @@ def _fly(work: Path, drones: list[dict], sitls: list[Sitl], players: list[Traffi
     try:
         for i, (d, s) in enumerate(zip(drones, sitls)):
             links = [f"udpin:127.0.0.1:{fleet_base + i}"] + [f"udpout:127.0.0.1:{fleet_base + j}" for j in range(n) if j != i]
-            cmd = _companion("fly", "--connect", f"udpin:127.0.0.1:{s.offboard_port}", "--scenario", str(d["scenario"]),
+            cmd = companion_argv("fly", "--connect", f"udpin:127.0.0.1:{s.offboard_port}", "--scenario", str(d["scenario"]),
                              "--arm", "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1",
                              "--goal", d["goal"], "--tlog", str(work / f"drone{i + 1}.tlog"),
                              "--duration", str(COMPANION_TIMEOUT_S - 20), "--json",
@@ -207,16 +201,8 @@ def _drone_figures(i: int, code: int, out: str, err: str, d: dict, player: Traff
     np.savez(work / f"drone{i + 1}_traces.npz", truth_t=truth_t, truth_p=truth_p, est_t=est_t, est_p=est_p,
              engaged_t=np.nan if player.engaged_t_s is None else player.engaged_t_s)
     # the same split at the companion's exit: while it commanded, and after it handed back to Hold
-    if player.engaged_t_s is not None and truth_t.size:
-        referee = player.referees["truth"]
-        radii = np.array(referee.radius_sum)
-        split: dict[bool, float] = {}
-        for t, x in zip(truth_t, truth_p):
-            if t >= player.engaged_t_s:
-                c = float(np.min(np.linalg.norm(referee.obstacle_positions(t - player.engaged_t_s) - x, axis=1) - radii))
-                split[t <= t_exit] = min(split.get(t <= t_exit, np.inf), c)
-        r["min_true_clearance_to_aircraft_in_control_m"] = round(split[True], 3) if True in split else None
-        r["min_true_clearance_to_aircraft_after_exit_m"] = round(split[False], 3) if False in split else None
+    r["min_true_clearance_to_aircraft_in_control_m"], r["min_true_clearance_to_aircraft_after_exit_m"] = \
+        clearance_in_control_and_after(player, truth_t, truth_p, t_exit)
     if closest.get("at_s") is not None and player.engaged_t_s is not None and truth_t.size and est_t.size:
         t_c = player.engaged_t_s + closest["at_s"]
         est_c = np.array([np.interp(t_c, est_t, est_p[:, k]) for k in range(3)])
@@ -232,7 +218,7 @@ def _drone_figures(i: int, code: int, out: str, err: str, d: dict, player: Traff
     r["holds_after_exit"] = bool(end_modes) and all(m == HOLD for m in end_modes)
     r["failsafe_texts"] = [text for _, text in player.texts if "ailsafe" in text]
     r["failsafe_texts_at_end"] = [text for t, text in player.texts if "ailsafe" in text and t >= t_exit - 3.0]
-    rep = subprocess.run(_companion("replay", str(work / f"drone{i + 1}.tlog"), "--scenario", str(d["scenario"]),
+    rep = subprocess.run(companion_argv("replay", str(work / f"drone{i + 1}.tlog"), "--scenario", str(d["scenario"]),
                                     "--arm", "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1",
                                     "--goal", d["goal"], "--json"),
                          capture_output=True, text=True, timeout=300, cwd=REPO)
@@ -280,14 +266,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--work", default="/tmp/px4-fleet")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO)
-    results = []
-    for k in range(args.runs):
-        r = fly_fleet(Path(args.work) / f"run{k}", args.drones, Path(args.scenario), seed=k)
-        r["failed"] = judge(r)
-        results.append(r)
-        print(json.dumps(r, indent=1, default=str), flush=True)
-    print("passed", sum(not r["failed"] for r in results), "of", len(results))
-    return 0 if all(not r["failed"] for r in results) else 1
+    return fly_runs(lambda k: fly_fleet(Path(args.work) / f"run{k}", args.drones, Path(args.scenario), seed=k),
+                    judge, args.runs)
 
 
 if __name__ == "__main__":

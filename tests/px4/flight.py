@@ -33,6 +33,7 @@ import os
 from mavsim.scenario import load_scenario
 from mavsim.traffic import PlayerLinks, TrafficPlayer
 from tests.px4.sitl import REPO, Sitl, raise_priority
+from tests.support.runs import fly_runs
 
 logger = logging.getLogger(__name__)
 
@@ -45,7 +46,8 @@ OBSTACLE_PORT = 14601  # the companion's receive-only obstacle link (`fly --obst
 HOLD = "AUTO.LOITER"   # armed (the player marks a disarmed mode " disarmed")
 
 
-def _companion(*args: str) -> list[str]:
+def companion_argv(*args: str) -> list[str]:
+    """The command line of ``companion ARGS`` with this Python."""
     return [sys.executable, "-m", "companion.cli", *args]
 
 
@@ -75,7 +77,7 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
     return result
 
 
-def _run_companion(cmd: list[str], player: TrafficPlayer,
+def _runcompanion_argv(cmd: list[str], player: TrafficPlayer,
                    signal_after_offboard: tuple[int, float] | None) -> subprocess.CompletedProcess:
     """Run ``companion fly`` (killed after COMPANION_TIMEOUT_S), signalled after OFFBOARD if asked."""
     fly = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
@@ -120,8 +122,8 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
         thread = threading.Thread(target=play, daemon=True)
         thread.start()
         try:
-            proc = _run_companion(
-                _companion("fly", "--connect", "udpin:127.0.0.1:14540", "--scenario", str(scenario), "--arm",
+            proc = _runcompanion_argv(
+                companion_argv("fly", "--connect", "udpin:127.0.0.1:14540", "--scenario", str(scenario), "--arm",
                            "--obstacles", f"udpin:127.0.0.1:{OBSTACLE_PORT}",
                            "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--tlog", str(tlog),
                            "--duration", str(COMPANION_TIMEOUT_S - 20), "--json", *extra),
@@ -158,7 +160,6 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
              offboard_t=np.nan if offboard_t is None else offboard_t, exit_t=t_exit,
              est_stamp_s=np.array([stamp for _, _, stamp in player.samples["estimate"]]))
     if offboard_t is None or truth_t.size == 0:
-        result["ok"] = False
         result["why"] = "never in OFFBOARD" if truth_t.size else "no ground truth received"
         return
     # takeoff: the height the vehicle holds after the takeoff, as SIH's truth has it: the mean
@@ -180,16 +181,9 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
     result["min_true_clearance_m"] = summary["referee"]["truth"]["min_clearance_m"]
     # the same split at the companion's exit: while it commanded, and after it handed back
     # (a vehicle holding in the obstacles' path is then up to the traffic)
-    referee = player.referees["truth"]
-    radii = np.array(referee.radius_sum)
-    in_control, after = [], []
-    for t, p in zip(truth_t, truth_p):
-        if t < offboard_t:
-            continue
-        c = float(np.min(np.linalg.norm(referee.obstacle_positions(t - offboard_t) - p, axis=1) - radii))
-        (in_control if t <= t_exit else after).append(c)
-    result["min_true_clearance_in_control_m"] = round(min(in_control), 3) if in_control else None
-    result["min_true_clearance_after_exit_m"] = round(min(after), 3) if after else None
+    in_control, after = clearance_in_control_and_after(player, truth_t, truth_p, t_exit)
+    result["min_true_clearance_in_control_m"] = in_control
+    result["min_true_clearance_after_exit_m"] = after
     # goal: the companion's time of arrival after engaging, and the true distance to the goal then
     t_goal = report.get("goal_reached_companion_t_s")
     engaged = [t for t, text in report.get("events", []) if str(text).startswith("ENGAGED")]
@@ -214,7 +208,7 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
     result["companion_exit_after_offboard_s"] = round(t_exit - offboard_t, 2)
     result["holds_after_exit"] = bool(end_modes) and all(m == HOLD for m in end_modes)
     # replay the recorded tlog
-    rep = subprocess.run(_companion("replay", str(tlog), "--scenario", str(scenario), "--arm", "--takeoff-alt",
+    rep = subprocess.run(companion_argv("replay", str(tlog), "--scenario", str(scenario), "--arm", "--takeoff-alt",
                                     str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--json", *extra),
                          capture_output=True, text=True, timeout=300, cwd=REPO)
     if rep.returncode == 0:
@@ -223,7 +217,22 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
                                                   "max_abs_diff_mps", "unmatched_commands", "tick_mismatches")}
     else:
         result["replay"] = {"error": rep.stderr.strip()[-500:]}
-    result["ok"] = judge(result) == []
+
+
+def clearance_in_control_and_after(player: TrafficPlayer, truth_t: np.ndarray, truth_p: np.ndarray,
+                                   t_exit: float) -> tuple[float | None, float | None]:
+    """The smallest true clearance (m, 3 decimals) to the player's obstacles from the vehicle's
+    OFFBOARD until the companion exited at ``t_exit`` and after it (None: no sample then), from
+    the truth samples ``truth_t`` (s, the player's clock) and ``truth_p`` (NED m)."""
+    referee, t0 = player.referees["truth"], player.engaged_t_s
+    radii = np.array(referee.radius_sum)
+    split: dict[bool, float] = {}
+    for t, p in zip(truth_t, truth_p):
+        if t0 is None or t < t0:
+            continue
+        c = float(np.min(np.linalg.norm(referee.obstacle_positions(t - t0) - p, axis=1) - radii))
+        split[t <= t_exit] = min(split.get(t <= t_exit, np.inf), c)
+    return tuple(round(split[k], 3) if k in split else None for k in (True, False))
 
 
 def judge_safety(r: dict, *, while_in_control: bool = False) -> list[str]:
@@ -283,14 +292,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("extra", nargs="*", help="extra companion arguments (after --)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO)
-    results = []
-    for i in range(args.runs):
-        r = fly_once(Path(args.work) / f"run{i}", Path(args.scenario), seed=i, extra=tuple(args.extra))
-        r["failed"] = judge(r)
-        results.append(r)
-        print(json.dumps(r, indent=1, default=str), flush=True)
-    print("passed", sum(not r["failed"] for r in results), "of", len(results))
-    return 0 if all(not r["failed"] for r in results) else 1
+    return fly_runs(lambda i: fly_once(Path(args.work) / f"run{i}", Path(args.scenario), seed=i, extra=tuple(args.extra)),
+                    judge, args.runs)
 
 
 if __name__ == "__main__":
