@@ -155,7 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "boots (for `companion fly --arm --takeoff-alt`)")
     p.add_argument("--obstacles-start", choices=OBSTACLES_START, default="boot",
                    help="when the obstacles' scripted motion starts: at boot (default) or when the vehicle is first "
-                        "armed in OFFBOARD")
+                        "armed in OFFBOARD (with --vehicles: once every vehicle has been)")
     p.add_argument("--obstacle-local-port", type=_port, default=14591, help="local obstacle socket port (default 14591)")
     p.add_argument("--no-gcs", action="store_true", help="serve the API link only")
     p.add_argument("--bind", default="127.0.0.1", help="address to bind (default 127.0.0.1, loopback)")
@@ -302,6 +302,9 @@ def _run_fleet(args: argparse.Namespace, scenario, signing_key: bytes | None, du
               + (f", GCS {args.bind}:{ports['gcs']} -> {args.target_host}:{args.gcs_port}" if "gcs" in ports else "")
               + (f", obstacles {args.bind}:{ports[OBSTACLE_LINK]} -> {args.target_host}:{args.obstacle_port + i}"
                  if OBSTACLE_LINK in ports else ""), file=sys.stderr, flush=True)
+    if args.obstacles_start == "offboard":
+        print(f"mavsim: obstacles start once all {args.vehicles} vehicles have been armed in OFFBOARD",
+              file=sys.stderr, flush=True)
     with fleet, _stop_on_signals(fleet) as interrupted:
         fleet.run(duration)
     if interrupted:

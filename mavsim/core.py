@@ -79,6 +79,10 @@ class Simulator:
         vehicle is first armed in OFFBOARD (engagement), so an encounter meets the vehicle
         however long it took to take off. Before that the obstacles report from their start
         points, at rest. :attr:`obstacles_started_s` is the simulated time it started.
+    obstacles_gate : callable or None
+        With ``obstacles_start = "offboard"``: called with whether this vehicle has engaged,
+        returns whether the obstacles may start now (default: as soon as it has). A fleet
+        passes one that waits for every vehicle (:class:`mavsim.fleet.FleetServer`).
     personality : str
         The autopilot imitated, a name in :data:`mavsim.personalities.PERSONALITIES`. The
         scenario's ``start_mode`` and ``params`` must be its own (SimulationError otherwise).
@@ -89,7 +93,8 @@ class Simulator:
 
     def __init__(self, scenario: Scenario | str | Path, seed: int = 0, links: tuple[str, ...] = ("api",),
                  signing: tuple[bytes, float] | None = None, obstacles_start: str = "boot",
-                 personality: str = DEFAULT_PERSONALITY, system_id: int = SYSID) -> None:
+                 personality: str = DEFAULT_PERSONALITY, system_id: int = SYSID,
+                 obstacles_gate: Callable[[bool], bool] | None = None) -> None:
         if obstacles_start not in OBSTACLES_START:
             raise SimulationError(f"obstacles_start must be one of {', '.join(OBSTACLES_START)}, got {obstacles_start!r}")
         if not isinstance(scenario, Scenario):
@@ -110,6 +115,7 @@ class Simulator:
         self.obstacles_start = obstacles_start
         #: us since boot the obstacles' motion started (0 at boot; None until engagement)
         self.motion_epoch_us: int | None = 0 if obstacles_start == "boot" else None
+        self._obstacles_gate: Callable[[bool], bool] = obstacles_gate or bool
         self.step_us = max(1, round(cfg.physics_step_s * 1e6))
         seeds = np.random.SeedSequence(self.seed).spawn(1 + len(scenario.obstacles))
         self._rng = np.random.Generator(np.random.PCG64(seeds[0]))
@@ -217,8 +223,9 @@ class Simulator:
         return (now_us - self.motion_epoch_us) * 1e-6
 
     def _check_engaged(self) -> None:
-        """Start the obstacles' motion at the first armed OFFBOARD (``obstacles_start = "offboard"``)."""
-        if self.motion_epoch_us is None and self.commander.engaged:
+        """Start the obstacles' motion at the first armed OFFBOARD (``obstacles_start = "offboard"``),
+        or when the gate says so (a fleet: once every vehicle has engaged)."""
+        if self.motion_epoch_us is None and self._obstacles_gate(self.commander.engaged):
             self.motion_epoch_us = self.now_us
             logger.info("t=%.2f engaged: obstacles start moving", self.now_us * 1e-6)
 

@@ -14,6 +14,11 @@ world (scripted traffic, walls) is the same for all. Each vehicle's simulator re
 traffic to its own companion; nothing of one vehicle reaches another's links: companions
 know of each other only through what they announce to each other.
 
+With ``obstacles_start = "offboard"`` the traffic of every vehicle waits at its start points
+until every vehicle has been armed in OFFBOARD once, and then moves for all of them from that
+moment (:class:`EveryVehicleEngaged`): the encounter meets the whole fleet in flight however
+long each companion took to start.
+
 Each vehicle runs its :class:`~mavsim.udp.UdpServer` in a thread of its own. The referee:
 each simulator judges its vehicle against the traffic; :func:`pair_clearances` judges
 every pair of vehicles from their truth traces (10 Hz), with the closest approach of
@@ -38,7 +43,7 @@ from mavsim.udp import LinkAddress, UdpServer
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["MAX_VEHICLES", "rotated", "rotated_scenarios", "pair_clearances", "FleetServer"]
+__all__ = ["MAX_VEHICLES", "rotated", "rotated_scenarios", "pair_clearances", "EveryVehicleEngaged", "FleetServer"]
 
 #: Most vehicles one mavsim serves.
 MAX_VEHICLES = 16
@@ -92,6 +97,27 @@ def pair_clearances(traces: Sequence[Sequence[dict]], radii: Sequence[float]) ->
     return out
 
 
+class EveryVehicleEngaged:
+    """The fleet's obstacle start: vehicle i's :meth:`gate` lets its traffic move once every
+    vehicle of the ``n`` has reported itself engaged (each from its own server thread)."""
+
+    def __init__(self, n: int) -> None:
+        self._engaged = [False] * int(n)
+
+    @property
+    def engaged(self) -> list[bool]:
+        """Which vehicles have engaged so far."""
+        return list(self._engaged)
+
+    def gate(self, i: int):
+        """Vehicle i's ``obstacles_gate`` (:class:`~mavsim.core.Simulator`)."""
+        def ready(engaged: bool) -> bool:
+            if engaged:
+                self._engaged[i] = True   # one list slot a thread: no lock needed
+            return all(self._engaged)
+        return ready
+
+
 class FleetServer:
     """N vehicles, each its own simulator and :class:`~mavsim.udp.UdpServer`, served in threads.
 
@@ -112,13 +138,14 @@ class FleetServer:
             raise SimulationError(f"a fleet has 1 to {MAX_VEHICLES} vehicles, got {len(scenarios)}")
         self.sims: list[Simulator] = []
         self.servers: list[UdpServer] = []
+        self.engagement = EveryVehicleEngaged(len(scenarios))
         try:
             for i, sc in enumerate(scenarios):
                 links = [LinkAddress("api", _shift(api_local_port, i), api_port + i, bind, target_host)]
                 if gcs_port is not None and gcs_local_port is not None:
                     links.append(LinkAddress("gcs", _shift(gcs_local_port, i), gcs_port, bind, target_host))
                 sim = Simulator(sc, seed=int(seed) * 1000 + i, links=tuple(link.name for link in links),
-                                system_id=1 + i, **sim_kwargs)
+                                system_id=1 + i, obstacles_gate=self.engagement.gate(i), **sim_kwargs)
                 if OBSTACLE_LINK in sim.links:
                     links.append(LinkAddress(OBSTACLE_LINK, _shift(obstacle_local_port, i), obstacle_port + i, bind,
                                              target_host))

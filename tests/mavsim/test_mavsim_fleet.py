@@ -14,10 +14,12 @@ from mavsim.cli import main
 from mavsim.errors import SimulationError
 from mavsim.fleet import FleetServer, pair_clearances, rotated, rotated_scenarios
 from mavsim.lockstep import LockstepSimulator
+from mavsim.personalities.base import OffboardSetpoint
 from mavsim.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 SWAP = ROOT / "configs" / "swap.toml"
+NAN3 = np.full(3, np.nan)
 
 
 def test_that_vehicle_i_of_n_is_the_scenario_turned_by_i_over_n_about_the_middle_of_its_route():
@@ -77,6 +79,50 @@ def test_that_a_fleet_serves_each_vehicle_on_its_own_ports_and_judges_every_pair
     # hovering at their starts, 6 m from the centre, 120 deg apart: 10.39 m apart, less both radii
     assert summary["pairs"]["1-2"]["min_clearance_m"] == pytest.approx(6.0 * math.sqrt(3.0) - 1.0, abs=0.1)
     assert not summary["collided"]
+
+
+def _engage(sim, t_us: int) -> None:
+    """Stream a hover setpoint and switch to OFFBOARD at ``t_us`` (sim's own clock), 0.5 s of streaming after."""
+    sp = OffboardSetpoint(NAN3, np.zeros(3), NAN3, np.nan, np.nan)
+    sim.advance_to(t_us)
+    sim.commander.accept_setpoint(sp, sim.time_s)
+    sim.commander.request_mode(6, 0, sim.time_s, sim.vehicle)
+    for k in range(1, 11):
+        sim.commander.accept_setpoint(sp, sim.time_s)
+        sim.advance_to(t_us + k * 50_000)
+
+
+def test_that_a_fleets_traffic_starts_for_every_vehicle_once_the_last_one_has_engaged():
+    scenario = load_scenario(SWAP)
+    fleet = FleetServer(rotated_scenarios(scenario, 2), seed=0, api_port=40000, api_local_port=0, gcs_port=None,
+                        gcs_local_port=None, obstacle_port=40100, obstacle_local_port=0, obstacles_start="offboard")
+    starts = {ob.name: ob.start_ned_m for ob in scenario.obstacles}
+    with fleet:
+        one, two = fleet.sims
+        _engage(one, 2_000_000)                # vehicle 1 flies from 2 s; vehicle 2's companion is late
+        two.advance_to(one.now_us)
+        assert fleet.engagement.engaged == [True, False]
+        for sim in fleet.sims:
+            assert sim.obstacles_started_s is None
+            for name, p in sim.truth.obstacle_positions_ned_m.items():
+                assert np.array_equal(p, starts[name]), name
+        one.advance_to(6_000_000)              # the fleet's clocks run side by side
+        _engage(two, 6_000_000)                # engaged at 6 s: now both vehicles' traffic moves
+        one.advance_to(two.now_us)
+        started = [sim.obstacles_started_s for sim in fleet.sims]
+    assert started[1] == pytest.approx(6.0, abs=0.011)
+    assert started[0] == pytest.approx(6.0, abs=0.011)   # vehicle 1 sees it on its next step
+    for sim in fleet.sims:
+        moved = sim.time_s - sim.obstacles_started_s
+        assert np.linalg.norm(sim.truth.obstacle_positions_ned_m["traffic-1"] - starts["traffic-1"]) == \
+            pytest.approx(1.5 * moved, abs=1e-6)
+
+
+def test_that_a_fleet_from_boot_moves_its_traffic_at_once():
+    fleet = FleetServer(rotated_scenarios(load_scenario(SWAP), 2), seed=0, api_port=40000, api_local_port=0,
+                        gcs_port=None, gcs_local_port=None, obstacle_port=40100, obstacle_local_port=0)
+    with fleet:
+        assert [sim.obstacles_started_s for sim in fleet.sims] == [0.0, 0.0]
 
 
 @pytest.mark.parametrize("flag", [["--lockstep"], ["--serial", "/dev/null"], ["--tlog", "x.tlog"]])

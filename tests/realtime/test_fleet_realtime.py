@@ -57,7 +57,8 @@ def test_that_two_drones_swap_in_real_time_knowing_each_other_only_by_their_anno
     sim = subprocess.Popen(
         [sys.executable, "-m", "mavsim.cli", "--scenario", str(SWAP), "--vehicles", "2", "--no-gcs",
          "--api-port", str(api), "--api-local-port", str(api_local), "--obstacle-port", str(obstacle),
-         "--obstacle-local-port", str(obstacle_local), "--duration", str(RUN_S), "--json"],
+         "--obstacle-local-port", str(obstacle_local), "--obstacles-start", "offboard", "--duration", str(RUN_S),
+         "--json"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     flies = []
     try:
