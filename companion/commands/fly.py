@@ -108,7 +108,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--linger", type=non_negative_seconds, default=3.0, metavar="S",
                    help="after the pilot took over, keep recording S seconds, then exit (default 3)")
     p.add_argument("--exit-after-goal", type=non_negative_seconds, default=None, metavar="S",
-                   help="S seconds after the goal is reached, switch the vehicle to Hold (AUTO.LOITER) and stop "
+                   help="S seconds after the goal is reached, once the vehicle is settled at it (at most "
+                        "[offboard] goal_settle_max_s, 10 s, more), switch it to Hold (AUTO.LOITER) and stop "
                         "once the HEARTBEAT shows it holding")
     p.add_argument("--signing-key-file", metavar="FILE",
                    help="MAVLink 2 signing: the 32-byte key as 64 hex digits in FILE (sign all, reject unsigned)")

@@ -151,7 +151,7 @@ class Companion:
         self.cycle = PlanCycle(self.planner_config, self.settings, planning=self.planning, builder=self.builder,
                                executor=self.executor, perception=self.perception, supervisor=self.supervisor,
                                state=self.state, records=self.records, tally=self.tally,
-                               on_goal_reached=self.sequencer.on_goal_reached)
+                               on_goal_reached=self.sequencer.on_goal_reached, on_at_goal=self.sequencer.on_at_goal)
         self.inbound = InboundRouter(self.obstacles, self.perception, self.sequencer, self.state)
         self.commanding = Commanding(self.settings, perception=self.perception, executor=self.executor,
                                      cycle=self.cycle, supervisor=self.supervisor, goal=self.builder.goal,

@@ -61,6 +61,9 @@ class OffboardSequence(Protocol):
     def on_goal_reached(self, t_s: float) -> None:
         """The companion reached its goal at link time ``t_s`` (the sequencer may hand back to Hold)."""
 
+    def on_at_goal(self, t_s: float, settled: bool) -> None:
+        """Whether the vehicle is settled at its goal at link time ``t_s`` (after it was reached)."""
+
     def hand_back(self, t_s: float, reason: str) -> bool:
         """Ask for Hold at link time ``t_s``, streaming until the vehicle shows it; whether it started
         (False when nothing of ours was streaming)."""

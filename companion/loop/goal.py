@@ -53,6 +53,9 @@ class GoalSource(Protocol):
     def reached(self, position: np.ndarray) -> bool:
         """Whether ``position`` counts as having reached the goal."""
 
+    def at_goal(self, position: np.ndarray) -> bool:
+        """Whether ``position`` is inside the final goal's acceptance now (no side effects)."""
+
 
 class ScenarioGoal:
     """The scenario's one goal, approached along the straight route from where the companion took over.
@@ -86,6 +89,9 @@ class ScenarioGoal:
         return route_target(start, goal, position, self.mission.waypoint_spacing_m)
 
     def reached(self, position: np.ndarray) -> bool:
+        return self.at_goal(position)
+
+    def at_goal(self, position: np.ndarray) -> bool:
         goal = self.goal
         return goal is not None and bool(np.linalg.norm(position - goal) <= self.mission.goal_tolerance_m)
 

@@ -128,6 +128,9 @@ class MissionGoal:
             return True
         return False
 
+    def at_goal(self, position: np.ndarray) -> bool:
+        return bool(self.waypoints) and self._within(position, self.waypoints[-1])
+
     def _within(self, position: np.ndarray, wp: Waypoint) -> bool:
         return bool(np.linalg.norm(np.asarray(position) - wp.position) <= wp.acceptance_m)
 

@@ -34,6 +34,11 @@ logger = logging.getLogger(__name__)
 
 _UNCONSTRAINED_WARN_PERIOD_S = 5.0
 
+#: Once the goal is reached, the vehicle is *settled* at it when it is inside the goal's
+#: acceptance and slower than this (m/s, the estimate's position rate): handed back then, an
+#: autopilot's Hold stops it within centimetres, where it was asked to be.
+GOAL_SETTLED_SPEED_MPS = 0.2
+
 
 @dataclass(frozen=True)
 class PlanArrival:
@@ -67,17 +72,21 @@ class PlanCycle:
         may keep only the latest, a ``deque`` with a ``maxlen``).
     tally : every applied replan summed (:class:`~companion.loop.records.ReplanTally`), for the report.
     on_goal_reached : called with the link time when the goal is first reached.
+    on_at_goal : called at every replan after that with the link time and whether the vehicle is
+        settled at the goal (inside its acceptance, slower than :data:`GOAL_SETTLED_SPEED_MPS`).
     """
 
     def __init__(self, planner_config: PlannerConfig, settings: LoopConfig, *, planning: PlanningService,
                  builder: RequestBuilder, executor: Executor, perception: Perception, supervisor: Supervisor,
                  state: CompanionState, records: MutableSequence[ReplanRecord], tally: ReplanTally,
-                 on_goal_reached: Callable[[float], None]) -> None:
+                 on_goal_reached: Callable[[float], None],
+                 on_at_goal: Callable[[float, bool], None] | None = None) -> None:
         self.cfg, self.settings = planner_config, settings
         self.planning, self.builder, self.executor = planning, builder, executor
         self.perception, self.supervisor = perception, supervisor
         self.state, self.records, self.tally = state, records, tally
         self._on_goal_reached = on_goal_reached
+        self._on_at_goal = on_at_goal
         self._replans_asked = 0
         self._replan = RateLimiter(planner_config.replan_period_s, tolerance_s=1e-9)
         self._unconstrained = RateLimiter(_UNCONSTRAINED_WARN_PERIOD_S)
@@ -196,6 +205,9 @@ class PlanCycle:
             self.state.goal_reached_t_s = t_s
             self._on_goal_reached(t_s)
             said.append(self.supervisor.say(t_s, SEV_INFO, "companion: goal reached"))
+        if self.state.goal_reached_t_s is not None and self._on_at_goal is not None:
+            speed = float(np.linalg.norm(velocity))
+            self._on_at_goal(t_s, self.builder.goal.at_goal(job.position_now) and speed <= GOAL_SETTLED_SPEED_MPS)
         self.state.tracks_beyond_walls_max = max(self.state.tracks_beyond_walls_max, len(job.tracks_beyond_walls))
         left_out = len(job.tracks_unconstrained)
         if left_out:

@@ -169,7 +169,14 @@ class OffboardConfig:
         at once.
     hold_after_goal_s : float or None
         Seconds after :meth:`OffboardSequencer.on_goal_reached` to hand the
-        vehicle back (Hold, see :meth:`OffboardSequencer.hand_back`); None never.
+        vehicle back (Hold, see :meth:`OffboardSequencer.hand_back`), once the loop says it
+        is settled at the goal (:meth:`OffboardSequencer.on_at_goal`), or
+        ``goal_settle_max_s`` later whatever it says; None never.
+    goal_settle_max_s : float
+        The longest the goal's hand-back waits beyond ``hold_after_goal_s`` for the vehicle
+        to settle at the goal (s): a goal it cannot settle at (traffic parked on it) still ends
+        the run. 0: hand back at ``hold_after_goal_s`` wherever the vehicle is (the rule
+        before 6 December 2026, for replaying logs flown then).
     heartbeat_timeout_s : float
         Autopilot heartbeat silence that counts as a lost link (MAVSDK: 3 s).
     target_system : int or None
@@ -202,6 +209,7 @@ class OffboardConfig:
     reengage: bool = False
     heartbeat_timeout_s: float = 3.0
     hold_after_goal_s: float | None = None
+    goal_settle_max_s: float = 10.0
     target_system: int | None = None
     autopilot_listen_s: float = 1.5
     autopilot: str = "auto"
@@ -210,7 +218,7 @@ class OffboardConfig:
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
-        for name in ("prestream_s", "takeoff_timeout_s", "takeoff_settle_s", "autopilot_listen_s"):
+        for name in ("prestream_s", "takeoff_timeout_s", "takeoff_settle_s", "autopilot_listen_s", "goal_settle_max_s"):
             set_(name, check.number(name, getattr(self, name), lo=0.0, hi=MAX_OFFBOARD_SECONDS))
         for name in ("retry_period_s", "heartbeat_timeout_s"):
             set_(name, check.number(name, getattr(self, name), positive=True, hi=MAX_OFFBOARD_SECONDS))
@@ -315,6 +323,7 @@ class OffboardSequencer:
         self._home_alt_amsl_m: float | None = None
         self._home_requested_s: float | None = None
         self._goal_s: float | None = None
+        self._settled_at_goal = False
         self._first_hb_s: float | None = None  # link time the followed autopilot was first heard
         self._other_systems: set[int] = set()  # autopilot systems heard besides the one followed
         self._other_kinds: set[tuple[int, int]] = set()  # autopilots of a kind not asked for (--autopilot)
@@ -466,7 +475,11 @@ class OffboardSequencer:
                                  mavlink2.MAV_SEVERITY_WARNING)
         hold_after = self.config.hold_after_goal_s
         if hold_after is not None and self._goal_s is not None and t_s - self._goal_s >= hold_after - 1e-9:
-            self.hand_back(t_s, "goal reached")
+            if self._settled_at_goal:
+                self.hand_back(t_s, "goal reached")
+            elif t_s - self._goal_s >= hold_after + self.config.goal_settle_max_s - 1e-9:
+                self.hand_back(t_s, "goal reached" if self.config.goal_settle_max_s == 0.0 else
+                               f"goal reached; not settled at it {self.config.goal_settle_max_s:g} s later")
         self._advance(t_s)
         self._request_home(t_s)
         self._request_streams(t_s)
@@ -475,9 +488,16 @@ class OffboardSequencer:
         return actions
 
     def on_goal_reached(self, t_s: float) -> None:
-        """The mission's goal was reached at ``t_s``: hand back after ``hold_after_goal_s``, if set."""
+        """The mission's goal was reached at ``t_s``: hand back after ``hold_after_goal_s``, if set,
+        once the vehicle is settled at it (:meth:`on_at_goal`)."""
         if self._goal_s is None:
             self._goal_s = t_s
+
+    def on_at_goal(self, t_s: float, settled: bool) -> None:
+        """Whether the vehicle is settled at its goal now (inside its acceptance and nearly still):
+        the goal's hand-back waits for it, so the autopilot's Hold keeps the vehicle at the goal
+        rather than where an overshoot carried it."""
+        self._settled_at_goal = bool(settled)
 
     def hand_back(self, t_s: float, reason: str = "mission complete") -> bool:
         """Ask for Hold (AUTO.LOITER) and keep streaming until the HEARTBEAT shows the vehicle out of OFFBOARD.

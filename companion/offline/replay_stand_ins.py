@@ -70,6 +70,9 @@ class AssumeEngaged:
     def on_goal_reached(self, t_s: float) -> None:
         """Ignored."""
 
+    def on_at_goal(self, t_s: float, settled: bool) -> None:
+        """Ignored."""
+
     def hand_back(self, t_s: float, reason: str) -> bool:
         """Nothing to hand back: a what-if never commands the vehicle (False)."""
         return False

@@ -331,6 +331,45 @@ def test_that_handing_back_streams_until_the_heartbeat_shows_hold():
     assert len(holds) == 2 and (holds[0].param1, holds[0].param2, holds[0].param3) == (129.0, 4.0, 3.0)
 
 
+def test_that_the_goals_hand_back_waits_until_the_vehicle_is_settled_at_the_goal():
+    s = Script(OffboardConfig(hold_after_goal_s=1.0), mode=px4.OFFBOARD)
+    assert s.run(0.5).phase is Phase.ENGAGED
+    s.seq.on_goal_reached(s.t)          # entered the goal's acceptance, still moving: an overshoot follows
+    s.seq.on_at_goal(s.t, False)
+    assert s.run(3.0).phase is Phase.ENGAGED
+    s.seq.on_at_goal(s.t, True)         # back inside, nearly still
+    s.run(0.05)
+    assert s.seq.phase is Phase.HANDING_BACK
+    assert s.seq.events[-1].text.startswith("HANDING_BACK: goal reached; requesting Hold")
+
+
+def test_that_the_goals_hand_back_waits_no_longer_than_its_bound_and_not_before_the_hold():
+    s = Script(OffboardConfig(hold_after_goal_s=1.0), mode=px4.OFFBOARD)
+    assert s.run(0.5).phase is Phase.ENGAGED
+    t_goal = s.t
+    s.seq.on_goal_reached(t_goal)
+    s.seq.on_at_goal(t_goal, True)      # settled at once: still held for hold_after_goal_s
+    assert s.run(1.0).phase is Phase.ENGAGED   # ticks to 0.95 s after the goal
+    s.run(0.05)
+    assert s.seq.phase is Phase.HANDING_BACK
+    s = Script(OffboardConfig(hold_after_goal_s=1.0, goal_settle_max_s=4.0), mode=px4.OFFBOARD)
+    s.run(0.5)
+    t_goal = s.t
+    s.seq.on_goal_reached(t_goal)
+    s.seq.on_at_goal(t_goal, True)
+    s.seq.on_at_goal(t_goal + 0.3, False)   # pushed off it (traffic on the goal): never settled again
+    assert s.run(1.0 + 4.0).phase is Phase.ENGAGED
+    s.run(0.05)
+    assert s.seq.phase is Phase.HANDING_BACK
+    assert "not settled at it 4 s later" in s.seq.events[-1].text
+    s = Script(OffboardConfig(hold_after_goal_s=1.0, goal_settle_max_s=0.0), mode=px4.OFFBOARD)
+    s.run(0.5)
+    s.seq.on_goal_reached(s.t)          # 0: the rule before the wait, wherever the vehicle is
+    s.seq.on_at_goal(s.t, False)
+    s.run(1.05)
+    assert s.seq.phase is Phase.HANDING_BACK
+
+
 def test_that_a_link_lost_while_handing_back_ends_held_when_the_vehicle_is_back_in_hold():
     """Found over a 57600-baud line: the Hold request went out, then no HEARTBEAT for 3 s; the vehicle
     came back in AUTO.LOITER, the mode asked for. That is the hand-back done, not PX4's failsafe."""

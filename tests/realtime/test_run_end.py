@@ -108,6 +108,7 @@ def test_that_the_goal_held_after_exit_after_goal_is_a_success():
     s, companion = _engaged(hold_after_goal_s=0.0)
     companion.state.goal_reached_t_s = s.t
     s.seq.on_goal_reached(s.t)
+    s.seq.on_at_goal(s.t, True)
     _until_end(s, companion, RunEnd(), vehicle=_holds)
     assert RunEnd().outcome(companion) is Outcome.GOAL_REACHED and Outcome.GOAL_REACHED.code == 0
 
