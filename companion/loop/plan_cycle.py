@@ -35,9 +35,10 @@ logger = logging.getLogger(__name__)
 _UNCONSTRAINED_WARN_PERIOD_S = 5.0
 
 #: Once the goal is reached, the vehicle is *settled* at it when it is inside the goal's
-#: acceptance and slower than this (m/s, the estimate's position rate): handed back then, an
-#: autopilot's Hold stops it within centimetres, where it was asked to be.
-GOAL_SETTLED_SPEED_MPS = 0.2
+#: acceptance and would still be this long later at its present velocity (s; the estimate's
+#: position rate): handed back then, an autopilot's Hold stops it inside, where it was asked
+#: to be, not where an overshoot would carry it.
+GOAL_SETTLE_LOOKAHEAD_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -73,7 +74,7 @@ class PlanCycle:
     tally : every applied replan summed (:class:`~companion.loop.records.ReplanTally`), for the report.
     on_goal_reached : called with the link time when the goal is first reached.
     on_at_goal : called at every replan after that with the link time and whether the vehicle is
-        settled at the goal (inside its acceptance, slower than :data:`GOAL_SETTLED_SPEED_MPS`).
+        settled at the goal (inside its acceptance now and :data:`GOAL_SETTLE_LOOKAHEAD_S` later).
     """
 
     def __init__(self, planner_config: PlannerConfig, settings: LoopConfig, *, planning: PlanningService,
@@ -206,8 +207,8 @@ class PlanCycle:
             self._on_goal_reached(t_s)
             said.append(self.supervisor.say(t_s, SEV_INFO, "companion: goal reached"))
         if self.state.goal_reached_t_s is not None and self._on_at_goal is not None:
-            speed = float(np.linalg.norm(velocity))
-            self._on_at_goal(t_s, self.builder.goal.at_goal(job.position_now) and speed <= GOAL_SETTLED_SPEED_MPS)
+            goal, p = self.builder.goal, job.position_now
+            self._on_at_goal(t_s, goal.at_goal(p) and goal.at_goal(p + velocity * GOAL_SETTLE_LOOKAHEAD_S))
         self.state.tracks_beyond_walls_max = max(self.state.tracks_beyond_walls_max, len(job.tracks_beyond_walls))
         left_out = len(job.tracks_unconstrained)
         if left_out:
