@@ -80,8 +80,7 @@ class PlanCycle:
     def __init__(self, planner_config: PlannerConfig, settings: LoopConfig, *, planning: PlanningService,
                  builder: RequestBuilder, executor: Executor, perception: Perception, supervisor: Supervisor,
                  state: CompanionState, records: MutableSequence[ReplanRecord], tally: ReplanTally,
-                 on_goal_reached: Callable[[float], None],
-                 on_at_goal: Callable[[float, bool], None] | None = None) -> None:
+                 on_goal_reached: Callable[[float], None], on_at_goal: Callable[[float, bool], None]) -> None:
         self.cfg, self.settings = planner_config, settings
         self.planning, self.builder, self.executor = planning, builder, executor
         self.perception, self.supervisor = perception, supervisor
@@ -206,7 +205,7 @@ class PlanCycle:
             self.state.goal_reached_t_s = t_s
             self._on_goal_reached(t_s)
             said.append(self.supervisor.say(t_s, SEV_INFO, "companion: goal reached"))
-        if self.state.goal_reached_t_s is not None and self._on_at_goal is not None:
+        if self.state.goal_reached_t_s is not None:
             goal, p = self.builder.goal, job.position_now
             self._on_at_goal(t_s, goal.at_goal(p) and goal.at_goal(p + velocity * GOAL_SETTLE_LOOKAHEAD_S))
         self.state.tracks_beyond_walls_max = max(self.state.tracks_beyond_walls_max, len(job.tracks_beyond_walls))

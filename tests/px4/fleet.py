@@ -137,10 +137,10 @@ def _fly(work: Path, drones: list[dict], sitls: list[Sitl], players: list[Traffi
         for i, (d, s) in enumerate(zip(drones, sitls)):
             links = [f"udpin:127.0.0.1:{fleet_base + i}"] + [f"udpout:127.0.0.1:{fleet_base + j}" for j in range(n) if j != i]
             cmd = companion_argv("fly", "--connect", f"udpin:127.0.0.1:{s.offboard_port}", "--scenario", str(d["scenario"]),
-                             "--arm", "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1",
-                             "--goal", d["goal"], "--tlog", str(work / f"drone{i + 1}.tlog"),
-                             "--duration", str(COMPANION_TIMEOUT_S - 20), "--json",
-                             *[a for url in links for a in ("--fleet", url)])
+                                 "--arm", "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1",
+                                 "--goal", d["goal"], "--tlog", str(work / f"drone{i + 1}.tlog"),
+                                 "--duration", str(COMPANION_TIMEOUT_S - 20), "--json",
+                                 *[a for url in links for a in ("--fleet", url)])
             d["command"] = cmd
             flies.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
                                           preexec_fn=raise_priority))
@@ -219,8 +219,8 @@ def _drone_figures(i: int, code: int, out: str, err: str, d: dict, player: Traff
     r["failsafe_texts"] = [text for _, text in player.texts if "ailsafe" in text]
     r["failsafe_texts_at_end"] = [text for t, text in player.texts if "ailsafe" in text and t >= t_exit - 3.0]
     rep = subprocess.run(companion_argv("replay", str(work / f"drone{i + 1}.tlog"), "--scenario", str(d["scenario"]),
-                                    "--arm", "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1",
-                                    "--goal", d["goal"], "--json"),
+                                        "--arm", "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1",
+                                        "--goal", d["goal"], "--json"),
                          capture_output=True, text=True, timeout=300, cwd=REPO)
     if rep.returncode == 0:
         s = json.loads(rep.stdout)

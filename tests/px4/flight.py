@@ -77,7 +77,7 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
     return result
 
 
-def _runcompanion_argv(cmd: list[str], player: TrafficPlayer,
+def _run_companion(cmd: list[str], player: TrafficPlayer,
                    signal_after_offboard: tuple[int, float] | None) -> subprocess.CompletedProcess:
     """Run ``companion fly`` (killed after COMPANION_TIMEOUT_S), signalled after OFFBOARD if asked."""
     fly = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
@@ -122,11 +122,11 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
         thread = threading.Thread(target=play, daemon=True)
         thread.start()
         try:
-            proc = _runcompanion_argv(
+            proc = _run_companion(
                 companion_argv("fly", "--connect", "udpin:127.0.0.1:14540", "--scenario", str(scenario), "--arm",
-                           "--obstacles", f"udpin:127.0.0.1:{OBSTACLE_PORT}",
-                           "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--tlog", str(tlog),
-                           "--duration", str(COMPANION_TIMEOUT_S - 20), "--json", *extra),
+                               "--obstacles", f"udpin:127.0.0.1:{OBSTACLE_PORT}",
+                               "--takeoff-alt", str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--tlog", str(tlog),
+                               "--duration", str(COMPANION_TIMEOUT_S - 20), "--json", *extra),
                 player, signal_after_offboard)
             t_exit = player.now_s()
             time.sleep(HOLD_WATCH_S)
@@ -209,7 +209,7 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
     result["holds_after_exit"] = bool(end_modes) and all(m == HOLD for m in end_modes)
     # replay the recorded tlog
     rep = subprocess.run(companion_argv("replay", str(tlog), "--scenario", str(scenario), "--arm", "--takeoff-alt",
-                                    str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--json", *extra),
+                                        str(TAKEOFF_ALT_M), "--exit-after-goal", "1", "--json", *extra),
                          capture_output=True, text=True, timeout=300, cwd=REPO)
     if rep.returncode == 0:
         s = json.loads(rep.stdout)
