@@ -137,8 +137,9 @@ class Companion:
             goal = PlacedGoal(scenario.mission, self.reference)
         #: the geofence the plans keep to (default: the scenario's, :func:`~companion.loop.fence_source.scenario_fence`)
         self.fence = fence if fence is not None else scenario_fence(scenario.mission, self.reference, plan)
-        self.builder = RequestBuilder(scenario, obstacle_radius=self.obstacles.radius, goal=goal,
-                                      sources=obstacle_sources, fence=self.fence, peers=self.peers,
+        self.builder = RequestBuilder(scenario, obstacle_radius=self.obstacles.radius,
+                                      obstacle_range=self.obstacles.planning_range, goal=goal, sources=obstacle_sources,
+                                      fence=self.fence, peers=self.peers,
                                       right_of_way=_right_of_way(scenario) if fleet else None)
         self.executor = Executor(scenario.planner, 1.0 / self.settings.setpoint_rate_hz, self.planner.lag,
                                  max_plan_age_s=self.settings.max_plan_age_s)

@@ -109,6 +109,10 @@ class RequestBuilder:
         Body radius of a tracked obstacle, m (e.g. from its traffic reports, see
         :meth:`companion.loop.intake.obstacles.ObstacleIntake.radius`); default: every track
         has ``[companion] obstacle_radius_m``.
+    obstacle_range : callable (track key) -> float or None, optional
+        How far out a tracked obstacle is planned around, m (its source's ``range_m``,
+        :meth:`companion.loop.intake.obstacles.ObstacleIntake.planning_range`); None, and the default
+        for every track and for the other sources' obstacles: ``[planner] sensing_range_m``.
     goal : GoalSource, optional
         Where the drone is going (default: :class:`~companion.loop.goal.ScenarioGoal`).
     sources : sequence of ObstacleSource, optional
@@ -125,6 +129,7 @@ class RequestBuilder:
 
     def __init__(self, scenario: CompanionScenario,
                  obstacle_radius: Callable[[Hashable], float] | None = None, *,
+                 obstacle_range: Callable[[Hashable], float | None] | None = None,
                  goal: GoalSource | None = None, sources: Sequence[ObstacleSource] | None = None,
                  fence=None, peers: PeerIntents | None = None, right_of_way: RightOfWay | None = None) -> None:
         self.scenario = scenario
@@ -132,6 +137,7 @@ class RequestBuilder:
         self.settings = scenario.companion
         default_radius_m = scenario.companion.obstacle_radius_m
         self.obstacle_radius: Callable[[Hashable], float] = obstacle_radius or (lambda key: default_radius_m)
+        self._obstacle_range: Callable[[Hashable], float | None] = obstacle_range or (lambda key: None)
         #: where the drone is going (default: the scenario's ``[mission]`` goal)
         self.goal: GoalSource = goal if goal is not None else ScenarioGoal(scenario.mission)
         #: obstacles besides the tracks (default: the scenario's static obstacles)
@@ -144,6 +150,11 @@ class RequestBuilder:
         self.peers = peers
         #: the fleet's rules of the road (None: none)
         self.right_of_way = right_of_way if peers is not None else None
+
+    def obstacle_range(self, key: Hashable) -> float:
+        """How far out track ``key`` is planned around, m: its source's range, else the sensing range."""
+        r = self._obstacle_range(key)
+        return self.cfg.sensing_range_m if r is None else r
 
     # ------------------------------------------------------------------ estimates
 
@@ -217,6 +228,7 @@ class RequestBuilder:
         predicted_means, predicted_covs = tracker.predict_many(constrained, np.concatenate([[t_v], times]))
         means, covs = list(predicted_means[:, 1:]), list(predicted_covs[:, 1:])
         radii = [self.obstacle_radius(key) for key in constrained]
+        ranges = [self.obstacle_range(key) for key in constrained]
         now_pos = dict(zip(constrained, predicted_means[:, 0]))
         now_cov = dict(zip(constrained, predicted_covs[:, 0]))
         for key, (m0, c0) in now_left_out.items():
@@ -244,6 +256,7 @@ class RequestBuilder:
             means.extend(h.means)
             covs.extend(h.covs)
             radii.extend(h.radii.tolist())
+            ranges.extend([self.cfg.sensing_range_m] * len(h.radii))
             leading.extend(bool(lead) and leads_the_way(goal, position, m[0], drone_reach + reach_m(r, c[0], self._sigmas))
                            for lead, m, c, r in zip(h.may_lead, h.means, h.covs, h.radii))
         target = self.goal.target(position)
@@ -271,6 +284,7 @@ class RequestBuilder:
             walls_normal=walls_normal,
             walls_offset=walls_offset,
             upper_bound_mask=np.array(leading, dtype=bool),
+            obstacle_ranges_m=np.array(ranges, dtype=float),
             margin_cov=margin if self.settings.tracking_margin_m2 > 0.0 else None,
             response_state=response_state,
         )

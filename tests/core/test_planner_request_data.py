@@ -29,6 +29,9 @@ CONFIGS = {
     "no progress weight": dict(weight_progress=0.0, c_max=0.99),
     "progress weight": dict(weight_progress=2.0, velocity_time_constant_s=0.3),   # P's stage blocks nonzero
     "sensing range": dict(sensing_range_m=7.0, c_max=0.99, velocity_time_constant_s=0.3),   # the second obstacle out
+    # the request's own ranges over the planner's: the first obstacle (6.6 m away) out, the second (9.9 m) in
+    "ranges per obstacle": dict(sensing_range_m=7.0, c_max=0.99, velocity_time_constant_s=0.3, ranges=(5.0, np.inf)),
+    "ranges per obstacle, response": dict(vehicle_response=PX4_LIKE, ranges=(5.0, 12.0)),
 }
 #: current velocities: signed zeros, one clipped axis, small and mixed values
 VELOCITIES = ([0.0, -0.0, 0.0], [-0.0, 0.7, -0.0], [9.0, -2.5, 0.3], [1e-12, -3e-7, 0.2], [-1.3, 1.7, -0.4])
@@ -84,20 +87,21 @@ def whole_vectors(cfg: PlannerConfig, form, layout, request: PlanRequest) -> dic
     tr, tc = layout.p_term_idx
     vel = jerk_scale * layout.p_vel_jerk + 2.0 * wv * layout.p_vel_diag
     p_data = np.concatenate([vel, blocks[:, tr, tc].ravel()])[layout.p_perm]
-    in_range = np.linalg.norm(request.obstacle_means[:, 0, :] - request.position, axis=-1) <= cfg.sensing_range_m
+    ranges = cfg.sensing_range_m if request.obstacle_ranges_m is None else request.obstacle_ranges_m
+    in_range = np.linalg.norm(request.obstacle_means[:, 0, :] - request.position, axis=-1) <= ranges
     return dict(v0=v0, p_data=p_data, q=q, q_hard=q_hard,
                 a_slot=a_slot, l=l, u=u, in_range=in_range, upper_active=in_range & request.upper_bound_mask,
                 constant=(wt + wp * N_) * request.target @ m @ request.target + wj / tau**4 * float(np.sum(c * c)))
 
 
-def request(velocity) -> PlanRequest:
+def request(velocity, ranges=None) -> PlanRequest:
     steps = np.arange(1, N + 1)[:, None, None]
     drone = np.array([[0.03, 0.004, -0.002], [0.004, 0.02, 0.001], [-0.002, 0.001, 0.015]]) * (1.0 + 0.05 * steps)
     means = np.array([[6.0, -4.0, -5.0], [9.0, 3.0, -4.5]])[:, None] + steps[None, :, :, 0] * np.array([0.0, 0.9, 0.05])
     return PlanRequest(position=[0.3, -0.2, -5.0], velocity=velocity, drone_covs=drone, target=[20.0, 1.0, -5.5],
                        obstacle_means=means, obstacle_covs=np.broadcast_to(0.02 * np.eye(3), (2, N, 3, 3)),
                        obstacle_radii=[0.5, 0.4], walls_normal=[[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]],
-                       walls_offset=[6.0, 6.0])
+                       walls_offset=[6.0, 6.0], obstacle_ranges_m=ranges)
 
 
 @pytest.mark.parametrize("name", sorted(CONFIGS))
@@ -110,11 +114,13 @@ def test_that_the_template_gives_the_whole_vectors_bit_for_bit(name, compiled):
 
 
 def _compare_with_whole_vectors(name):
+    settings = dict(CONFIGS[name])
+    ranges = settings.pop("ranges", None)
     cfg = PlannerConfig(horizon_steps=N, step_s=0.3, velocity_max_mps=(3.0, 3.0, 1.0),
-                        accel_max_mps2=(2.0, 2.0, 1.0), **CONFIGS[name])
+                        accel_max_mps2=(2.0, 2.0, 1.0), **settings)
     planner = Planner(cfg)
     for velocity in VELOCITIES:
-        req = request(velocity)
+        req = request(velocity, ranges)
         planner.solve(req)                                  # makes the workspace of this shape
         ws = planner.workspaces[(N, req.num_obstacles, req.num_walls)]
         data = RequestData.build(ws.template, planner.formulation, req)

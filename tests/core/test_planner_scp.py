@@ -147,6 +147,26 @@ def test_that_obstacles_beyond_sensing_range_are_ignored():
     assert plan.min_contour_of_touch == 1.0               # only in-range obstacles count
 
 
+def test_that_an_obstacle_s_own_range_overrides_the_sensing_range():
+    """Per obstacle: the request's range decides, both ways (a report from far out is planned
+    around beyond the sensing range; a short range leaves it out within it)."""
+    cfg, req = scenario_one(sensing_range_m=5.0)           # obstacle starts 9.5 m away
+    far = Planner(cfg).solve(dataclasses.replace(req, obstacle_ranges_m=[20.0]))
+    assert far.in_range[0] and far.status == "optimal"
+    assert np.abs(far.positions[:, 1:]).max() > 0.3        # goes round it
+    assert far.min_contour_of_touch >= cfg.c_min - 1e-3
+    cfg, req = scenario_one()                              # sensing range 20 m
+    near = Planner(cfg).solve(dataclasses.replace(req, obstacle_ranges_m=[np.float64(5.0)]))
+    assert not near.in_range[0] and np.abs(near.positions[:, 1]).max() < 0.1
+
+
+@pytest.mark.parametrize("ranges", [[0.0], [-1.0], [np.nan], [5.0, 6.0], "far"])
+def test_that_bad_obstacle_ranges_are_rejected(ranges):
+    _, req = scenario_one()
+    with pytest.raises(InputError, match="obstacle_ranges_m"):
+        dataclasses.replace(req, obstacle_ranges_m=ranges)
+
+
 def test_that_a_warm_started_replan_reuses_the_solver_and_agrees():
     cfg, req = scenario_one()
     planner = Planner(cfg)

@@ -171,3 +171,29 @@ def test_that_bad_traffic_settings_name_the_file_and_key():
         traffic_from_toml({"source": [{"link": "*"}] * 65}, "f.toml [traffic]")
     with pytest.raises(ConfigError, match="obstacle_links"):
         traffic_from_toml({"obstacle_links": ["udpin:0.0.0.0:1"] * 17}, "f.toml [traffic]")
+
+
+def test_that_each_source_sets_how_far_out_its_obstacles_are_planned_around():
+    """``range_m``: ``[traffic]``'s for every report, a ``[[traffic.source]]`` rule's for its own
+    (the fleet link's too); None without either (the planner's ``sensing_range_m``)."""
+    plain = intake()
+    plain.claims(rx(odometry(1_000_000, 5.0), 101, 197, 200.0, link="obstacles1"), AP)
+    assert plain.tracker.keys() and plain.planning_range(plain.tracker.keys()[0]) is None
+    ruled = intake(traffic_from_toml({"range_m": 40.0, "source": [
+        {"link": "obstacles", "system": 102, "range_m": 8.0},
+        {"link": "fleet", "range_m": math.inf}]}, "t"))
+    for sysid, link in ((101, "obstacles1"), (102, "obstacles1"), (2, "fleet")):
+        ruled.claims(rx(odometry(1_000_000, 5.0), sysid, 197, 200.0, link=link), AP)
+    ranges = {key[0]: ruled.planning_range(key) for key in ruled.tracker.keys()}
+    assert ranges == {101: 40.0, 102: 8.0, 2: math.inf}
+
+
+@pytest.mark.parametrize(("table", "match"), [
+    ({"range_m": 0.0}, r"t: range_m = 0.0 must be positive"),
+    ({"range_m": "far"}, r"t: range_m = 'far' is not a number"),
+    ({"source": [{"link": "fleet", "range_m": -5}]}, r"t \[\[traffic.source\]\] #1: range_m = -5 must be positive"),
+    ({"source": [{"link": "peers"}]}, r"link = 'peers' must be .*\"fleet\""),
+])
+def test_that_a_bad_range_is_named(table, match):
+    with pytest.raises(ConfigError, match=match):
+        traffic_from_toml(table, "t")

@@ -97,6 +97,47 @@ def test_that_the_request_builder_takes_each_tracks_radius_from_its_lookup():
     assert sized.realised_contour[default] == plain.realised_contour[default]
 
 
+def test_that_a_sources_range_reaches_the_plan_request():
+    """``[traffic] range_m`` and a source rule's, from the intake through the request to the plan:
+    a report 15 m out is planned around with 20 m, not with the 10 m sensing range."""
+    import dataclasses
+
+    from companion.loop.intake.traffic_config import traffic_from_toml
+
+    base = load_scenario("configs/antipodal.toml")
+    assert base.planner.sensing_range_m == 10.0
+    traffic = traffic_from_toml({"range_m": 20.0, "source": [{"link": "obstacles", "system": 21, "range_m": 5.0}]}, "t")
+    jobs = []
+
+    class Spy(InlinePlanning):
+        def submit(self, job):
+            jobs.append(job)
+            super().submit(job)
+
+    for scenario in (base, dataclasses.replace(base, traffic=traffic)):
+        jobs.clear()
+        companion = Companion(scenario, planning=Spy(Planner(scenario.planner)))
+        for i in range(8):
+            t = 0.05 * i
+            companion.handle(received(px4_offboard_heartbeat(), (1, 1), t))
+            companion.handle(received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), 0, 0, -5, 0, 0, 0), (1, 1), t))
+            for sysid, north in ((20, 15.0), (21, 4.0)):
+                companion.handle(received(mavlink2.MAVLink_local_position_ned_message(int(t * 1000), north, 0.0, -5, -1, 0, 0),
+                                          (sysid, 197), t, "obstacles1"))
+            companion.tick(t)
+        job = jobs[-1]
+        keys = list(job.tracks_constrained)
+        ranges = dict(zip(keys, job.request.obstacle_ranges_m))
+        statics = job.request.obstacle_ranges_m[len(keys):]
+        assert statics.tolist() == [10.0] * len(scenario.static_obstacles)    # not tracks: the sensing range
+        if scenario is base:
+            assert ranges == {(20, 197, "obstacles1"): 10.0, (21, 197, "obstacles1"): 10.0}
+        else:
+            assert ranges == {(20, 197, "obstacles1"): 20.0, (21, 197, "obstacles1"): 5.0}
+        in_range = dict(zip(keys, Planner(scenario.planner).solve(job.request).in_range))
+        assert in_range[(20, 197, "obstacles1")] == (scenario is not base)
+
+
 def test_that_beyond_walls_checks_the_trackers_own_prediction_at_every_step():
     from estimator import ObstacleTracker, TrackerConfig
 

@@ -109,7 +109,7 @@ def _fill_signature(t):
                   f, r1, r1, r1, n, n,                             # q: jerk scale and column, templates, V and p
                   r1, r2, n, n,                                    # A: constants, wall normals, wall slot, N
                   r1, r1, f, r1, n, yes, n, yes, f, n,             # l, u: templates, dyn, accel, cmd rows
-                  r3, f, b1,                                       # means, sensing range, c_max mask
+                  r3, r1, b1,                                      # means, ranges, c_max mask
                   w1, w1, w1, w1, w1, w1, w1, wb, wb)              # out: v0, P, q, q_hard, A, l, u, masks
 
 
@@ -119,7 +119,7 @@ def _fill(velocity, v0_low, v0_high, m, goal, stage_scale, terminal_scale, progr
           jerk_scale, jerk_column, q0, q_hard0, v_col, p_col,
           a_data0, walls_normal, wall_slot, n_steps,
           l0, u0, lag_c, position, dyn_row, accel, accel_row, cmd, alpha, cmd_row,
-          means, sensing_range, upper_mask,
+          means, ranges, upper_mask,
           v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active):
     """:meth:`RequestData.build`'s elementwise work for a :class:`LagModel`, in one pass.
 
@@ -128,7 +128,7 @@ def _fill(velocity, v0_low, v0_high, m, goal, stage_scale, terminal_scale, progr
     (``scale * m``); the jerk term ``jerk_scale (0 + D2[:, 0] V_0)``; ``q_p = (-2 w_p) g``
     with ``(-2 w_t) g`` added on the last step; the wall normals in ``A``; the dynamics rows
     ``c V_0 + p_0`` (then zeros), ``V_0`` added to the first acceleration rows and
-    ``alpha V_0`` to the first command rows; the sensing range ``sqrt((dx^2 + dy^2) + dz^2)``.
+    ``alpha V_0`` to the first command rows; each obstacle's range ``sqrt((dx^2 + dy^2) + dz^2) <= range``.
     """
     for k in range(3):
         x = velocity[k]
@@ -177,7 +177,7 @@ def _fill(velocity, v0_low, v0_high, m, goal, stage_scale, terminal_scale, progr
             u[cmd_row + k] = u[cmd_row + k] + shift
     for j in range(means.shape[0]):
         dx, dy, dz = means[j, 0, 0] - position[0], means[j, 0, 1] - position[1], means[j, 0, 2] - position[2]
-        in_range[j] = math.sqrt((dx * dx + dy * dy) + dz * dz) <= sensing_range
+        in_range[j] = math.sqrt((dx * dx + dy * dy) + dz * dz) <= ranges[j]
         upper_active[j] = in_range[j] and upper_mask[j]
 
 
@@ -254,6 +254,14 @@ class RequestData:
                    l=l, u=u, wall_upper=wall_upper, in_range=in_range, upper_active=upper_active, y_warm=y_warm)
 
 
+def obstacle_ranges(request: PlanRequest, cfg: PlannerConfig) -> np.ndarray:
+    """(P,) how far out each obstacle of ``request`` is planned around, m: the request's own
+    ranges, else the planner's ``sensing_range_m`` for all."""
+    if request.obstacle_ranges_m is not None:
+        return request.obstacle_ranges_m
+    return np.full(request.num_obstacles, float(cfg.sensing_range_m))
+
+
 def _elementwise_numpy(template: RequestTemplate, request: PlanRequest, m: np.ndarray, goal: np.ndarray) -> tuple:
     """``(v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active)`` of :meth:`RequestData.build`
     with numpy's operations (``m``: the symmetrised inverse of the terminal covariance, ``goal``:
@@ -293,11 +301,11 @@ def _elementwise_numpy(template: RequestTemplate, request: PlanRequest, m: np.nd
         first = slice(layout.row["cmd"].start, layout.row["cmd"].start + 3)
         l[first] += layout.lag.alpha * v0
         u[first] += layout.lag.alpha * v0
-    # sensing range: distance from the drone now to each obstacle's first predicted mean
+    # range: distance from the drone now to each obstacle's first predicted mean
     if request.num_obstacles:
         d = request.obstacle_means[:, 0, :] - request.position
         dist = np.sqrt(np.add.reduce(d * d, axis=-1))     # numpy's norm over the last axis, without its checks
-        in_range = dist <= cfg.sensing_range_m
+        in_range = dist <= obstacle_ranges(request, cfg)
     else:
         in_range = np.zeros(0, dtype=bool)
     upper_active = in_range & request.upper_bound_mask  # obstacles c_max applies to
@@ -322,7 +330,7 @@ def _elementwise_compiled(template: RequestTemplate, request: PlanRequest, m: np
             template.l, template.u, float(lag.c), np.ascontiguousarray(request.position, dtype=float),
             layout.row["dyn"].start, bool(lag.bounds_command_steps), layout.row["accel"].start,
             bool(layout.row["cmd"].size), float(lag.alpha), layout.row["cmd"].start,
-            np.ascontiguousarray(request.obstacle_means, dtype=float), float(cfg.sensing_range_m),
+            np.ascontiguousarray(request.obstacle_means, dtype=float), obstacle_ranges(request, cfg),
             np.ascontiguousarray(request.upper_bound_mask, dtype=bool),
             v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active)
     return v0, p_data, q, q_hard, a_slot, l, u, in_range, upper_active

@@ -87,6 +87,12 @@ class PlanRequest:
         Obstacles the ``c_max`` upper bound applies to (default: all in sensing range).
         The caller decides which obstacle the drone is following, e.g. the one leading
         the way to the goal in a corridor; the bound is released for the others.
+    obstacle_ranges_m : (P,) array, optional
+        How far out each obstacle is planned around, metres (``inf`` allowed): an obstacle
+        whose first predicted mean is farther from ``position`` than its range is left out of
+        this plan. Default: the planner's ``sensing_range_m`` for every obstacle. A companion
+        sets it per source: what its own sensors see from a few metres, what a transponder
+        or a fleet peer announces by radio from much further.
     margin_cov : (3, 3) array, optional
         Tracking margin, m^2: added to the drone's covariance in the safety rows (obstacles
         and walls) at every step, not in the cost's Mahalanobis metric. It stands for how far
@@ -110,6 +116,7 @@ class PlanRequest:
     walls_normal: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     walls_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
     upper_bound_mask: np.ndarray | None = None
+    obstacle_ranges_m: np.ndarray | None = None
     margin_cov: np.ndarray | None = None
     response_state: np.ndarray | None = None
 
@@ -158,6 +165,15 @@ class PlanRequest:
             mask = mask.copy()
         mask.setflags(write=False)
         set_("upper_bound_mask", mask)
+        if self.obstacle_ranges_m is not None:
+            try:
+                ranges = np.array(np.atleast_1d(self.obstacle_ranges_m) if p else np.zeros(0), dtype=float)
+            except (TypeError, ValueError):
+                raise InputError(f"obstacle_ranges_m is not a numeric array: {self.obstacle_ranges_m!r}") from None
+            if ranges.shape != (p,) or np.isnan(ranges).any() or np.any(ranges <= 0.0):
+                raise InputError(f"obstacle_ranges_m must be ({p},) ranges > 0 m (inf allowed), got {self.obstacle_ranges_m!r}")
+            ranges.setflags(write=False)
+            set_("obstacle_ranges_m", ranges)
         if self.margin_cov is None:
             set_("margin_cov", _array("margin_cov", np.zeros((3, 3)), (3, 3)))
             set_("safety_covs", covs)

@@ -148,6 +148,7 @@ class ObstacleIntake:
         self.warnings: list[str] = []
         self._clocks: dict[Hashable, SourceClock] = {}
         self._radius: dict[Hashable, float] = {}
+        self._range: dict[Hashable, float] = {}   # tracks whose source sets a range (range_m)
         self._last_adsb: dict[int, tuple[float, int, int, int]] = {}
         self._warned_odometry: set[tuple[int, int]] = set()
         self._texts: list[tuple[Severity, str]] = []
@@ -354,6 +355,8 @@ class ObstacleIntake:
         radius = policy.radius_m if policy.radius_m is not None else (r.radius_m or self.default_radius_m)
         if track in self._radius or len(self._radius) < _MAX_SOURCES:
             self._radius[track] = radius
+        if policy.range_m is not None and (track in self._range or len(self._range) < _MAX_SOURCES):
+            self._range[track] = policy.range_m
 
     def _reject(self, source: str, reason: str, t_s: float) -> None:
         self.rejected[(source, reason)] += 1
@@ -364,6 +367,11 @@ class ObstacleIntake:
     def radius(self, track: Hashable) -> float:
         """Body radius of a tracked obstacle, metres."""
         return self._radius.get(track, self.default_radius_m)
+
+    def planning_range(self, track: Hashable) -> float | None:
+        """How far out a tracked obstacle is planned around (its source's ``range_m``), metres;
+        None: the planner's ``sensing_range_m``."""
+        return self._range.get(track)
 
     def outbound(self, t_s: float, autopilot: tuple[int, int] | None) -> tuple[list, list[tuple[Severity, str]]]:
         """(messages to send, (severity, text) to announce) at link time ``t_s``.

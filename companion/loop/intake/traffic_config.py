@@ -15,15 +15,26 @@ Example (every key optional)::
     statustext_period_s = 5.0     # at most one rejection STATUSTEXT per period
     geoid_separation_m = 47.0     # geoid above the WGS-84 ellipsoid here (m); only used until the
                                   # autopilot's GPS_RAW_INT (alt_ellipsoid - alt) is heard
+    range_m = 30.0                # how far out reported obstacles are planned around (m); default
+                                  # [planner] sensing_range_m
 
     [[traffic.source]]            # per-source overrides, the first match wins
-    link = "obstacles"            # "autopilot", "obstacles" (any obstacle link) or a link name ("obstacles1")
+    link = "obstacles"            # "autopilot", "obstacles" (any obstacle link), a link name ("obstacles1")
+                                  # or "fleet" (the other drones' announcements)
     system = 101                  # optional: only this MAVLink system id
     icao = 0xABCDEF               # optional: only this ADS-B ICAO address
     kinds = ["ODOMETRY"]
     position_std_m = 0.2
     radius_m = 0.5                # body radius of obstacles from this source (default [companion] obstacle_radius_m;
                                   # ADSB emitter types give their own unless a source sets it)
+    range_m = 10.0                # this source's obstacles are planned around within 10 m of the drone
+
+Range. The planner constrains an obstacle only while its predicted mean now lies within a
+range of the drone (``[planner] sensing_range_m``, the paper's sensing range ``S_r``, 10 m).
+That models what the drone sees itself; a transponder's or a fleet peer's report comes by
+radio from much further, and a drone closing with it at 5 m/s has 2 s inside 10 m, which
+0.5 m/s^2 turns into 1 m sideways. ``range_m`` sets it for reported obstacles, per source:
+about twice the horizon's reach at the speeds met (docs/notes/fleet.md).
 
 Altitude datums. GPS_GLOBAL_ORIGIN, GLOBAL_POSITION_INT and ADSB_VEHICLE carry altitudes
 above mean sea level; UTM_GLOBAL_POSITION (``alt``) and OPEN_DRONE_ID_LOCATION
@@ -39,6 +50,7 @@ only explicitly (``autopilot_link_kinds = ["ADSB_VEHICLE", "ODOMETRY"]``); it is
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -71,6 +83,7 @@ class SourcePolicy:
     vertical_std_m: float
     velocity_std_mps: float
     radius_m: float | None = None
+    range_m: float | None = None
 
 
 @dataclass(frozen=True)
@@ -104,6 +117,7 @@ class TrafficConfig:
     clock_jump_s: float = 1.0
     statustext_period_s: float = 5.0
     geoid_separation_m: float | None = None
+    range_m: float | None = None
     sources: tuple[SourceRule, ...] = field(default_factory=tuple)
 
     def policy(self, link: str, system: int, icao: int | None = None) -> SourcePolicy:
@@ -112,19 +126,20 @@ class TrafficConfig:
             if rule.matches(link, system, icao):
                 return rule.policy
         kinds = self.autopilot_link_kinds if link == AUTOPILOT_LINK else self.obstacle_link_kinds
-        return SourcePolicy(kinds, self.position_std_m, self.vertical_std_m, self.velocity_std_mps)
+        return SourcePolicy(kinds, self.position_std_m, self.vertical_std_m, self.velocity_std_mps, range_m=self.range_m)
 
 
 _KEYS = frozenset({"obstacle_links", "autopilot_link_kinds", "obstacle_link_kinds", "position_std_m", "vertical_std_m",
                    "velocity_std_mps", "clock_window_s", "clock_jump_s", "statustext_period_s", "geoid_separation_m",
-                   "source"})
+                   "range_m", "source"})
 _SOURCE_KEYS = frozenset({"link", "system", "icao", "kinds", "position_std_m", "vertical_std_m", "velocity_std_mps",
-                          "radius_m"})
+                          "radius_m", "range_m"})
 #: Bounds on what a scenario file may ask for (every list read from the file is bounded).
 MAX_OBSTACLE_LINKS = 16
 MAX_SOURCES = 64
 _MAX_STD = 1e4          # m, m/s: a 1-sigma accuracy worse than 10 km is a typo
 _MAX_PERIOD_S = 3600.0
+_MAX_RANGE_M = 1e5      # m: beyond 100 km is a typo (inf is allowed: every report planned around)
 
 
 def _std(key: str, value: Any) -> float:
@@ -140,6 +155,13 @@ def _kinds(key: str, value: Any) -> frozenset:
     return frozenset(value)
 
 
+def _range(key: str, value: Any) -> float:
+    v = check.number(key, value, positive=True, allow_inf=True)
+    if math.isfinite(v) and v > _MAX_RANGE_M:
+        raise ConfigError(f"{key} = {value!r} must be <= {_MAX_RANGE_M:g} m (or inf)")
+    return v
+
+
 def _links(key: str, value: Any) -> tuple[str, ...]:
     if not isinstance(value, list) or len(value) > MAX_OBSTACLE_LINKS:
         raise ConfigError(f"{key} = {value!r} must be a list of at most {MAX_OBSTACLE_LINKS} pymavlink connection strings")
@@ -152,8 +174,8 @@ def _links(key: str, value: Any) -> tuple[str, ...]:
 def _source(raw: Mapping[str, Any], base: TrafficConfig) -> SourceRule:
     """One ``[[traffic.source]]`` table (errors name the key; the caller adds where)."""
     link = raw.get("link", "*")
-    if not isinstance(link, str) or not (link in ("*", AUTOPILOT_LINK) or link.startswith(OBSTACLE_LINK_PREFIX)):
-        raise ConfigError(f"link = {link!r} must be \"autopilot\", \"obstacles\", \"obstaclesN\" or \"*\"")
+    if not isinstance(link, str) or not (link in ("*", AUTOPILOT_LINK, FLEET_LINK) or link.startswith(OBSTACLE_LINK_PREFIX)):
+        raise ConfigError(f"link = {link!r} must be \"autopilot\", \"obstacles\", \"obstaclesN\", \"fleet\" or \"*\"")
     default_kinds = base.autopilot_link_kinds if link == AUTOPILOT_LINK else base.obstacle_link_kinds
     policy = SourcePolicy(
         kinds=_kinds("kinds", raw["kinds"]) if "kinds" in raw else default_kinds,
@@ -161,6 +183,7 @@ def _source(raw: Mapping[str, Any], base: TrafficConfig) -> SourceRule:
         vertical_std_m=_std("vertical_std_m", raw.get("vertical_std_m", base.vertical_std_m)),
         velocity_std_mps=_std("velocity_std_mps", raw.get("velocity_std_mps", base.velocity_std_mps)),
         radius_m=check.number("radius_m", raw["radius_m"], positive=True, hi=1000.0) if "radius_m" in raw else None,
+        range_m=_range("range_m", raw["range_m"]) if "range_m" in raw else base.range_m,
     )
     system = check.integer("system", raw["system"], lo=1, hi=255) if "system" in raw else None
     icao = check.integer("icao", raw["icao"], lo=0, hi=0xFFFFFF) if "icao" in raw else None
@@ -190,6 +213,8 @@ def traffic_from_toml(table: Any, where: str) -> TrafficConfig:
                 values[key] = check.number(key, table[key], positive=True, hi=_MAX_PERIOD_S)
         if "geoid_separation_m" in table:
             values["geoid_separation_m"] = check.number("geoid_separation_m", table["geoid_separation_m"], lo=-120.0, hi=120.0)
+        if "range_m" in table:
+            values["range_m"] = _range("range_m", table["range_m"])
     except ConfigError as exc:
         raise ConfigError(f"{where}: {exc}") from None
     base = TrafficConfig(**values)  # the section's own defaults are the sources' defaults
