@@ -23,8 +23,10 @@ Coordination (docs/FLEET.md):
   (:mod:`companion.core.intent`); without one, at constant velocity.
 - ``prioritised``: the lower system id has the higher priority. A drone predicts the
   higher-priority peers along their fresh intents (as fixed) and leaves the lower-priority
-  peers out of its plan while their intents are fresh (they give way); a peer without a fresh
-  intent is an ordinary track, whatever its priority.
+  peers out of its plan while their intents are fresh and keep clear of its own plan (they
+  give way); a lower-priority peer whose intent comes inside this drone's plan (it could not
+  give way: boxed in, or met too fast for its acceleration) and a peer without a fresh intent
+  are ordinary tracks, whatever their priority.
 
 Right of way (:mod:`companion.loop.right_of_way`): with ``keep_right`` a drone that meets a
 peer moves its target to the right of its way, so drones that meet pass left side to left

@@ -6,7 +6,9 @@ tracker under its key ``(system id, component id, link)``). Its intents
 kept here under the same key. When the request builder has predicted its tracks at
 constant velocity, :meth:`PeerIntents.predict` replaces a peer's row by its intent if the
 coordination mode uses it and the intent is fresh; :meth:`PeerIntents.gives_way` says which
-peers a prioritised drone leaves to give way (``[fleet]``, :mod:`companion.loop.fleet_config`).
+peers a prioritised drone leaves to give way (``[fleet]``, :mod:`companion.loop.fleet_config`),
+as long as their announced plans keep clear of its own (:meth:`PeerIntents.along`: the request
+builder checks).
 
 Bounded: at most ``max_peers`` intents are kept (a new peer beyond them replaces the one
 heard from longest ago, counted). Pure: times are the caller's (vehicle time, s).
@@ -49,7 +51,9 @@ class PeerIntents:
         self._intents: dict[Hashable, Intent] = {}
         self._peers: set[Hashable] = set()   # keys that ever announced an intent (bounded as the intents)
         #: what happened to intents: ``received``, ``withdrawn``, ``evicted``, ``own`` (an intent under
-        #: this drone's own system id, never used), ``used`` and ``stale`` (per track and replan)
+        #: this drone's own system id, never used), ``used`` and ``stale`` (per track and replan),
+        #: ``not_giving_way`` (per replan: a lower-priority peer whose plan came too close to this
+        #: drone's, so planned around)
         self.counts: Counter = Counter()
 
     def __len__(self) -> int:
@@ -127,6 +131,15 @@ class PeerIntents:
             self.counts["stale"] += 1
             return None
         self.counts["used"] += 1
+        return self.along(key, times_s, position_cov_now, t_v)
+
+    def along(self, key: Hashable, times_s: np.ndarray, position_cov_now: np.ndarray,
+              t_v: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """``key``'s fresh intent at ``times_s`` as :meth:`predict` gives it, whatever the mode and
+        priority (means (N, 3) NED m, covariances (N, 3, 3) m^2), or None without a fresh one."""
+        intent = self.fresh(key, t_v)
+        if intent is None:
+            return None
         means = intent_means(intent, times_s)
         covs = intent_covariances(position_cov_now, intent.t0_s, times_s, self.config.intent_growth_m2ps)
         return means, covs

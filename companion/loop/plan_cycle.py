@@ -191,6 +191,7 @@ class PlanCycle:
             lead_s=lead,
             response_state=self.perception.response_state(t_v + lead),
             shift=self.executor.displacement(t_v, t_v + lead, velocity) if lead > 0.0 else None,
+            plan_in_force=self.executor.position_at,
         )
         self._replans_asked += 1
         self._epoch_of[job.seq] = self.perception.reset_epoch

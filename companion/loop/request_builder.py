@@ -93,6 +93,10 @@ class ReplanJob:
 
 #: How far (m, beyond the drone's radius) the way round a fence's zones keeps off their corners.
 FENCE_CORNER_MARGIN_M = 1.0
+#: A lower-priority peer is left out while the contour of touch between its announced plan and
+#: this drone's stays at least this fraction of ``c_min`` (it keeps ``c_min`` itself when it can;
+#: a plan with slack comes far inside). See :meth:`RequestBuilder._clear_of_plan`.
+GIVE_WAY_FLOOR = 0.5
 
 
 class RequestBuilder:
@@ -190,6 +194,7 @@ class RequestBuilder:
         lead_s: float = 0.0,
         shift: np.ndarray | None = None,
         response_state: np.ndarray | None = None,
+        plan_in_force: Callable[[float], np.ndarray | None] | None = None,
     ) -> ReplanJob:
         """The planning problem at link time ``t_s`` / vehicle time ``t_v`` from the current estimates.
 
@@ -200,6 +205,10 @@ class RequestBuilder:
         from that start. Tracks silent for longer than the tracker's ``drop_after_s`` are pruned first.
         ``response_state`` (3, 2) is the response model's internal state at the plan's start
         (:attr:`~companion.core.planner.request.PlanRequest.response_state`; ``None``: steady).
+        ``plan_in_force(t_v)`` is where the plan being flown puts the drone at vehicle time ``t_v``
+        (NED m, None without one: :meth:`companion.loop.executor.Executor.position_at`); a
+        prioritised drone leaves a lower-priority peer out only while that peer's announced
+        plan keeps clear of it (:meth:`_clear_of_plan`).
         """
         est = perception.drone.state
         n, tau = self.cfg.horizon_steps, self.cfg.step_s
@@ -212,16 +221,17 @@ class RequestBuilder:
         tracker.prune(t_v)
         times = t0 + tau * np.arange(1, n + 1)
         keys = list(tracker.keys())
+        margin = self.settings.tracking_margin_m2 * np.eye(3)
         giving_way: list = []
         if self.peers is not None:
             giving_way = [k for k in keys if self.peers.gives_way(k, t_v)]
             if giving_way:
+                giving_way = self._clear_of_plan(giving_way, tracker, times, t_v, plan_in_force, drone_covs + margin)
                 keys = [k for k in keys if k not in set(giving_way)]
         # every track's estimate read once, as arrays (row k for keys[k]), when they are set apart or ranked
         stack = tracker.stacked(keys) if len(keys) > self.settings.max_constrained_tracks or self.scenario.walls else None
         row = {k: i for i, k in enumerate(keys)} if stack is not None else {}
         near, beyond = self._split_beyond_walls(keys, stack, perception, t0)
-        margin = self.settings.tracking_margin_m2 * np.eye(3)
         constrained, left_out = self._select(near, stack, row, t0, position, initial_velocity, cov_now + margin)
         now_left_out = self._estimates_now(left_out + beyond, stack, row, t_v)
         # every constrained track now (t_v, column 0) and over the horizon, in one pass
@@ -308,6 +318,35 @@ class RequestBuilder:
             tracks_giving_way=tuple(giving_way),
             tracks_along_intent=tuple(along_intent),
         )
+
+    def _clear_of_plan(self, giving_way: list, tracker, times: np.ndarray, t_v: float,
+                       plan_in_force: Callable[[float], np.ndarray | None] | None, safety_covs: np.ndarray) -> list:
+        """The lower-priority peers of ``giving_way`` whose announced plans keep clear of this drone's plan.
+
+        A peer that gives way plans around this drone's announced plan. When it cannot (its
+        plan needed slack: it was boxed in, or met this drone too fast for its acceleration),
+        its announced plan comes inside this drone's: the contour of touch between the two
+        plans (this drone's covariances with the tracking margin, ``safety_covs`` (N, 3, 3) m^2;
+        the peer's as its intent predicts them) falls below ``GIVE_WAY_FLOOR * c_min`` at some
+        step. Such a peer is planned around like any other (counted ``not_giving_way``), so
+        the higher-priority drone moves too. Without a plan in force every peer keeps clear.
+        """
+        if plan_in_force is None or plan_in_force(float(times[0])) is None:
+            return giving_way
+        path = np.array([plan_in_force(float(t)) for t in times])
+        _, covs_now = tracker.predict_many(giving_way, np.array([t_v]))
+        floor = GIVE_WAY_FLOOR * self.cfg.c_min
+        clear = []
+        for key, cov_now in zip(giving_way, covs_now[:, 0]):
+            along = self.peers.along(key, times, cov_now, t_v)
+            if along is not None:
+                contour = contour_of_touch(path, safety_covs, along[0], along[1],
+                                           self.cfg.drone_radius_m + self.obstacle_radius(key))
+                if float(np.min(contour)) < floor:
+                    self.peers.counts["not_giving_way"] += 1
+                    continue
+            clear.append(key)
+        return clear
 
     # ------------------------------------------------------------------ many tracks
 

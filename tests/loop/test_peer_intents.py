@@ -86,11 +86,12 @@ def _perception(scenario):
     return perception
 
 
-def _job(scenario, peers):
+def _job(scenario, peers, plan_in_force=None):
     goal = ScenarioGoal(MissionConfig(goal_ned_m=np.array([0.0, 12.0, -5.0]), goal_tolerance_m=0.3, waypoint_spacing_m=4.0))
     goal.start(np.array([0.0, -3.0, -5.0]))
     return RequestBuilder(scenario, goal=goal, sources=(), peers=peers).build(
-        seq=0, t_s=10.0, t_v=10.0, perception=_perception(scenario), initial_velocity=np.zeros(3), warm_start=None)
+        seq=0, t_s=10.0, t_v=10.0, perception=_perception(scenario), initial_velocity=np.zeros(3), warm_start=None,
+        plan_in_force=plan_in_force)
 
 
 def test_that_the_request_predicts_a_peer_along_its_intent_and_leaves_out_one_that_gives_way():
@@ -117,3 +118,27 @@ def test_that_the_request_predicts_a_peer_along_its_intent_and_leaves_out_one_th
     assert job.tracks_giving_way == (PEER,) and job.tracks_constrained == ((9, 1, "obstacles1"),)
     assert job.request.num_obstacles == 1
     assert PEER in job.realised_contour                               # still judged, though not planned around
+
+
+def test_that_a_lower_priority_peer_whose_plan_comes_inside_ours_is_planned_around():
+    """Prioritised: a peer gives way by planning around this drone's announced plan. When its own
+    announced plan comes inside this drone's plan in force (it could not give way: a plan with
+    slack), it is planned around like any other peer, and counted."""
+    from companion.core.intent import intent_means
+
+    scenario = load_scenario(SCENARIO)
+    peers = PeerIntents(FleetConfig(coordination="prioritised"), own_system=1)
+    intent = _turning(t0=10.0)
+    peers.update(PEER, intent)
+    hovering = lambda t: np.array([0.0, -3.0, -5.0])                  # noqa: E731  3 m and more from the peer's plan
+    job = _job(scenario, peers, plan_in_force=hovering)
+    assert job.tracks_giving_way == (PEER,) and peers.counts["not_giving_way"] == 0
+    # this drone's plan 0.8 m beside the peer's, all the way: bodies (0.5 m each) nearly touch
+    beside = lambda t: intent_means(intent, np.array([t]))[0] + np.array([0.0, -0.8, 0.0])   # noqa: E731
+    job = _job(scenario, peers, plan_in_force=beside)
+    assert job.tracks_giving_way == () and PEER in job.tracks_constrained
+    assert job.tracks_along_intent == ()        # a lower-priority peer: its intent is not a fixed plan to us
+    assert peers.counts["not_giving_way"] == 1
+    # no plan in force yet (the first plan): the peer gives way as announced
+    job = _job(scenario, peers, plan_in_force=lambda t: None)
+    assert job.tracks_giving_way == (PEER,)
