@@ -81,3 +81,14 @@ def test_that_a_stage_run_narrowed_by_k_selects_within_the_stages_marker(tmp_pat
     argv = stage_argv("quarantine", tmp_path / "r.xml", "clean_stop")
     assert argv[-4:] == ["-m", "quarantine", "-k", "clean_stop"]
     assert "-k" not in stage_argv("realtime", tmp_path / "r.xml")
+
+
+def test_that_a_failed_round_keeps_its_files_and_says_where(tmp_path):
+    """Each stage run's tmp_path lives under --basetemp; a failure's line names it."""
+    argv = stage_argv("realtime", tmp_path / "r.xml", basetemp=tmp_path / "round03-realtime-tmp")
+    assert f"--basetemp={tmp_path / 'round03-realtime-tmp'}" in argv
+    assert not any(a.startswith("--basetemp") for a in stage_argv("realtime", tmp_path / "r.xml"))
+    failed = {"test": "t", "outcome": "failed", "seconds": 1.0, "flight": "outcome goal reached", "true_clearance_m": None,
+              "message": "", "kept": "out/x/round03-realtime-tmp"}
+    (line,) = tally([[failed]])["t"].failures
+    assert line == "round 1: outcome goal reached | files kept in out/x/round03-realtime-tmp"

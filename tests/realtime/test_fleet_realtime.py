@@ -94,7 +94,7 @@ def test_that_two_drones_swap_in_real_time_knowing_each_other_only_by_their_anno
         "collided": truth["collided"],
         "min_true_clearance_m": min([truth["min_pair_clearance_m"]] + [c for v in per for c in v["min_clearance_m"].values()]),
         "min_realised_contour": min((r.get("fleet") or {}).get("min_peer_realised_contour", 1.0) for r in reports),
-        "setpoint_gap_max_ms": max(r.get("setpoint_gap_max_ms") or 0.0 for r in reports)})
+        "setpoint_gap_max_ms": max(r.get("setpoint_gap_max_ms") or 0.0 for r in reports)}, kept_at=tmp_path)
     verdict = {"pairs": truth["pairs"], "per_vehicle": [
         {k: v.get(k) for k in ("goal_reached", "time_to_goal_s", "min_goal_distance_m", "collisions", "min_clearance_m")}
         for v in truth["per_vehicle"]]}

@@ -11,6 +11,10 @@ cannot reach that is marked ``quarantine`` (out of CI, ``make quarantine-test``)
     python -m tests.support.flake_check --runs 20 --stage quarantine   # the tests kept out of CI
     python -m tests.support.flake_check --runs 20 --stage quarantine -k clean_stop   # some of them
 
+A stage run's temporary files (``tmp_path``: the flights' tlogs, truth traces and reports) go
+to ``OUT/roundNN-STAGE-tmp``; a round whose stage passed has them removed, a failed one keeps
+them, so a rare failure can be replayed and read (``companion replay``).
+
 Exit status: 0 when every test passed every run, 1 otherwise, 2 on bad arguments. Every stage run
 is bounded in time (``--stage-timeout``); its process group is ended when the time runs out.
 """
@@ -20,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import signal
 import statistics
 import subprocess
@@ -91,7 +96,8 @@ def tally(rounds: list[list[dict]]) -> dict[str, TestRuns]:
             if case["outcome"] == "passed":
                 runs.passes += 1
             else:
-                runs.failures.append(f"round {k}: " + (case["flight"] or case["message"] or "failed (no message)"))
+                kept = f" | files kept in {case['kept']}" if case.get("kept") else ""
+                runs.failures.append(f"round {k}: " + (case["flight"] or case["message"] or "failed (no message)") + kept)
     return table
 
 
@@ -108,10 +114,13 @@ def render(table: dict[str, TestRuns], rounds_asked: int) -> str:
     return "\n".join(lines)
 
 
-def stage_argv(stage: str, xml: Path, keyword: str | None = None) -> list[str]:
-    """The pytest command of one stage run, its JUnit report to ``xml``, narrowed by ``-k keyword``."""
+def stage_argv(stage: str, xml: Path, keyword: str | None = None, basetemp: Path | None = None) -> list[str]:
+    """The pytest command of one stage run, its JUnit report to ``xml``, narrowed by ``-k keyword``,
+    its temporary files under ``basetemp`` (default: pytest's own, of which it keeps three)."""
     narrow = ["-k", keyword] if keyword else []
-    return [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", f"--junitxml={xml}", *STAGES[stage], *narrow]
+    temp = [f"--basetemp={basetemp}"] if basetemp is not None else []
+    return [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", f"--junitxml={xml}", *temp,
+            *STAGES[stage], *narrow]
 
 
 def _run_stage(argv: list[str], timeout_s: float, env: dict) -> int:
@@ -146,8 +155,10 @@ def main(argv: list[str] | None = None) -> int:
         for stage in stages:
             xml = args.out / f"round{k:02d}-{stage}.xml"
             xml.unlink(missing_ok=True)
+            temp = args.out / f"round{k:02d}-{stage}-tmp"
+            shutil.rmtree(temp, ignore_errors=True)
             t0 = time.monotonic()
-            rc = _run_stage(stage_argv(stage, xml, args.keyword), args.stage_timeout, env)
+            rc = _run_stage(stage_argv(stage, xml, args.keyword, temp), args.stage_timeout, env)
             got = read_junit(xml.read_text()) if xml.exists() else []
             if rc == -1 or not got:
                 got.append({"test": f"<stage {stage}>", "outcome": "failed", "seconds": time.monotonic() - t0,
@@ -155,6 +166,12 @@ def main(argv: list[str] | None = None) -> int:
                             "message": "timed out" if rc == -1 else f"pytest exit {rc}, no report"})
             cases += got
             failed = sum(c["outcome"] == "failed" for c in got)
+            if failed:
+                for case in got:
+                    if case["outcome"] == "failed":
+                        case["kept"] = str(temp)
+            else:
+                shutil.rmtree(temp, ignore_errors=True)
             print(f"round {k}/{args.runs} {stage}: {len(got) - failed} passed, {failed} failed, "
                   f"{time.monotonic() - t0:.0f} s", flush=True)
         rounds.append(cases)
