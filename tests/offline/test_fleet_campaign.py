@@ -9,6 +9,7 @@ import pytest
 
 from companion.cli import main
 from companion.errors import ConfigError
+from companion.loop.config import scenario_from_dict
 from companion.offline.campaign.fleet import (FleetRun, generate_swap, read_fleet_results, run_fleet_campaign,
                                               summarise_fleet)
 
@@ -22,6 +23,10 @@ def test_that_an_episode_is_drawn_from_its_seed_and_index_alone():
     speeds = [ob["speed_mps"] for ob in a[0]["world"]["obstacles"]]
     assert len(speeds) == 2 and all(1.0 <= v <= 2.0 for v in speeds)
     assert all(s["planner"]["c_min"] == 0.9 for s in a)
+    # reports and announcements planned around from 30 m, the sensing range left at 10 m
+    loaded = scenario_from_dict(a[1], "episode.toml")
+    assert loaded.traffic.range_m == 30.0 and loaded.traffic.policy("fleet", 1).range_m == 30.0
+    assert loaded.planner.sensing_range_m == 10.0
 
 
 def test_that_a_campaign_writes_its_runs_resumes_them_and_refuses_another_campaigns_file(tmp_path):

@@ -3,8 +3,11 @@
 Episode ``i`` of a campaign with seed ``S`` draws from ``np.random.default_rng([S, i, N])``:
 a circle of radius 5-8 m turned by a random angle, N drones on it bound for the opposite
 points (:func:`companion.offline.swap.swap_scenarios`), and two aircraft crossing it on
-random chords (bearing any, 0-0.5 radius off the centre, 1.0-2.0 m/s). The simulators'
-seed is ``episode_sim_seed(S, i)``. Each (episode, mode) run is
+random chords (bearing any, 0-0.5 radius off the centre, 1.0-2.0 m/s). Every drone takes
+the aircraft's reports and the other drones' announcements from :data:`REPORT_RANGE_M`
+(``[traffic] range_m``), not from the planner's 10 m sensing range: both come by radio, and
+two drones closing at 5 m/s have 2 s inside 10 m. The simulators' seed is
+``episode_sim_seed(S, i)``. Each (episode, mode) run is
 :func:`~companion.offline.fleet_harness.run_fleet_lockstep` with that coordination mode; a
 run is a pure function of its task, so it runs the same in a pool worker or on a Dask
 cluster (:func:`companion.offline.campaign.run.open_executor`).
@@ -15,8 +18,8 @@ contour between drones, deadlocks, and the (pair, tick) samples within 10 m and 
 (the per-step collision frequency between drones, against ``Phi(-r_min)``).
 
 Results file: JSON lines, a header (format ``ogccmpc-fleet-campaign``, family, drones, seed,
-``c_min``, duration) then one row per finished run; ``resume`` flies only the missing runs and
-refuses a file whose header differs.
+``c_min``, duration, report range) then one row per finished run; ``resume`` flies only the
+missing runs and refuses a file whose header differs.
 """
 
 from __future__ import annotations
@@ -46,6 +49,8 @@ VERSION = 1
 FAMILY = "swap"
 RADIUS_RANGE_M = (5.0, 8.0)
 TRAFFIC_SPEED_MPS = (1.0, 2.0)
+#: m: how far out every drone plans around the aircraft and the other drones (``[traffic] range_m``).
+REPORT_RANGE_M = 30.0
 #: A results row longer than this is not one the campaign wrote.
 MAX_LINE_BYTES = 1024 * 1024
 
@@ -63,6 +68,7 @@ def generate_swap(seed: int, index: int, drones: int, *, c_min: float = 0.90, du
                                duration_s=duration_s)
     for s in scenarios:
         s["planner"] = {**s.get("planner", {}), "c_min": float(c_min)}
+        s["traffic"] = {**s.get("traffic", {}), "range_m": REPORT_RANGE_M}
     return scenarios
 
 
@@ -140,7 +146,7 @@ def run_fleet_episode(task: FleetTask) -> FleetRun:
 
 def fleet_header(drones: int, seed: int, c_min: float, duration_s: float) -> dict:
     return {"format": FORMAT, "version": VERSION, "family": FAMILY, "drones": int(drones), "seed": int(seed),
-            "c_min": float(c_min), "duration_s": float(duration_s)}
+            "c_min": float(c_min), "duration_s": float(duration_s), "report_range_m": REPORT_RANGE_M}
 
 
 def read_fleet_results(path: Path) -> tuple[dict | None, dict[tuple[int, str], FleetRun]]:
