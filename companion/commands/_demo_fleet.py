@@ -5,8 +5,10 @@ Real time (``--realtime``): ``mavsim --vehicles N`` and N ``companion fly`` proc
 loopback UDP. Drone i's scenario file is the scenario with its start and goal turned as
 mavsim turns vehicle i (:func:`companion.offline.swap.rotated_fleet`); its fly listens on
 its own ports (API and obstacles shifted by i, as mavsim sends), hears the other drones on
-its own fleet port and tells each of them on theirs. Every wait is bounded; every process
-started is ended.
+its own fleet port and tells each of them on theirs. The traffic waits at its start points
+until every vehicle has engaged (``mavsim --obstacles-start offboard``), so the encounter
+meets the fleet in flight however long the companions took to start. Every wait is
+bounded; every process started is ended.
 """
 
 from __future__ import annotations
@@ -138,8 +140,9 @@ def _realtime(scenario: Path, drones: list[dict], args: argparse.Namespace, out:
         while time.monotonic() < deadline and not all(udp_port_taken(obstacle + i) or f.poll() is not None
                                                       for i, f in enumerate(flies)):
             time.sleep(0.05)
+        # the traffic waits until every vehicle is flying: N companions start over seconds on a busy machine
         sim_cmd = [sys.executable, "-m", "mavsim.cli", "--scenario", str(scenario), "--vehicles", str(n), "--no-gcs",
-                   "--seed", str(args.seed), "--api-port", str(api), "--api-local-port", str(api_local),
+                   "--obstacles-start", "offboard", "--seed", str(args.seed), "--api-port", str(api), "--api-local-port", str(api_local),
                    "--obstacle-port", str(obstacle), "--obstacle-local-port", str(obstacle_local),
                    "--speed", str(args.speed), "--json"]
         if out is not None:
