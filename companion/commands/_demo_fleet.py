@@ -142,8 +142,8 @@ def _realtime(scenario: Path, drones: list[dict], args: argparse.Namespace, out:
             time.sleep(0.05)
         # the traffic waits until every vehicle is flying: N companions start over seconds on a busy machine
         sim_cmd = [sys.executable, "-m", "mavsim.cli", "--scenario", str(scenario), "--vehicles", str(n), "--no-gcs",
-                   "--obstacles-start", "offboard", "--seed", str(args.seed), "--api-port", str(api), "--api-local-port", str(api_local),
-                   "--obstacle-port", str(obstacle), "--obstacle-local-port", str(obstacle_local),
+                   "--obstacles-start", "offboard", "--seed", str(args.seed), "--api-port", str(api),
+                   "--api-local-port", str(api_local), "--obstacle-port", str(obstacle), "--obstacle-local-port", str(obstacle_local),
                    "--speed", str(args.speed), "--json"]
         if out is not None:
             sim_cmd += ["--truth-trace", str(out / "truth_trace.jsonl")]

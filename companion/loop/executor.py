@@ -133,15 +133,16 @@ class Executor:
             return np.asarray(estimated_velocity, dtype=float) * (t_to_v - t_from_v)
         return self._plan_position(t_to_v - self.plan_t0_v) - self._plan_position(t_from_v - self.plan_t0_v)
 
-    def _plan_position(self, dt: float) -> np.ndarray:
-        """Position of the plan in force ``dt`` s after its start (NED m): its step-end positions
-        interpolated from where it started, held at either end."""
+    def _plan_position(self, dt):
+        """Position of the plan in force ``dt`` s after its start (NED m; (3,), or (K, 3) for K
+        times): its step-end positions interpolated from where it started, held at either end."""
         times = self.cfg.step_s * np.arange(self.plan.positions.shape[0] + 1)
         points = np.vstack([self.plan_p0[None], self.plan.positions])
-        return np.array([np.interp(dt, times, points[:, k]) for k in range(3)])
+        return np.stack([np.interp(dt, times, points[:, k]) for k in range(3)], axis=-1)
 
-    def position_at(self, t_v: float) -> np.ndarray | None:
-        """Where the plan in force puts the drone at vehicle time ``t_v`` (NED m), or None without one."""
+    def position_at(self, t_v):
+        """Where the plan in force puts the drone at vehicle time ``t_v`` (NED m: (3,), or (K, 3)
+        for an array of K times), or None without one."""
         return None if self.plan is None else self._plan_position(t_v - self.plan_t0_v)
 
     def reference(self, t_v: float) -> tuple[np.ndarray, np.ndarray] | None:

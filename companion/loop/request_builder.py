@@ -194,7 +194,7 @@ class RequestBuilder:
         lead_s: float = 0.0,
         shift: np.ndarray | None = None,
         response_state: np.ndarray | None = None,
-        plan_in_force: Callable[[float], np.ndarray | None] | None = None,
+        plan_in_force: Callable[[np.ndarray], np.ndarray | None] | None = None,
     ) -> ReplanJob:
         """The planning problem at link time ``t_s`` / vehicle time ``t_v`` from the current estimates.
 
@@ -205,10 +205,11 @@ class RequestBuilder:
         from that start. Tracks silent for longer than the tracker's ``drop_after_s`` are pruned first.
         ``response_state`` (3, 2) is the response model's internal state at the plan's start
         (:attr:`~companion.core.planner.request.PlanRequest.response_state`; ``None``: steady).
-        ``plan_in_force(t_v)`` is where the plan being flown puts the drone at vehicle time ``t_v``
-        (NED m, None without one: :meth:`companion.loop.executor.Executor.position_at`); a
-        prioritised drone leaves a lower-priority peer out only while that peer's announced
-        plan keeps clear of it (:meth:`_clear_of_plan`).
+        ``plan_in_force(times)`` is where the plan being flown puts the drone at vehicle times
+        ``times`` (N,) (NED m, (N, 3); None without one:
+        :meth:`companion.loop.executor.Executor.position_at`); a prioritised drone leaves a
+        lower-priority peer out only while that peer's announced plan keeps clear of it
+        (:meth:`_clear_of_plan`).
         """
         est = perception.drone.state
         n, tau = self.cfg.horizon_steps, self.cfg.step_s
@@ -320,7 +321,7 @@ class RequestBuilder:
         )
 
     def _clear_of_plan(self, giving_way: list, tracker, times: np.ndarray, t_v: float,
-                       plan_in_force: Callable[[float], np.ndarray | None] | None, safety_covs: np.ndarray) -> list:
+                       plan_in_force: Callable[[np.ndarray], np.ndarray | None] | None, safety_covs: np.ndarray) -> list:
         """The lower-priority peers of ``giving_way`` whose announced plans keep clear of this drone's plan.
 
         A peer that gives way plans around this drone's announced plan. When it cannot (its
@@ -331,9 +332,9 @@ class RequestBuilder:
         step. Such a peer is planned around like any other (counted ``not_giving_way``), so
         the higher-priority drone moves too. Without a plan in force every peer keeps clear.
         """
-        if plan_in_force is None or plan_in_force(float(times[0])) is None:
+        path = None if plan_in_force is None else plan_in_force(times)
+        if path is None:
             return giving_way
-        path = np.array([plan_in_force(float(t)) for t in times])
         _, covs_now = tracker.predict_many(giving_way, np.array([t_v]))
         floor = GIVE_WAY_FLOOR * self.cfg.c_min
         clear = []

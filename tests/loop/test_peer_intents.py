@@ -130,11 +130,11 @@ def test_that_a_lower_priority_peer_whose_plan_comes_inside_ours_is_planned_arou
     peers = PeerIntents(FleetConfig(coordination="prioritised"), own_system=1)
     intent = _turning(t0=10.0)
     peers.update(PEER, intent)
-    hovering = lambda t: np.array([0.0, -3.0, -5.0])                  # noqa: E731  3 m and more from the peer's plan
+    hovering = lambda t: np.broadcast_to([0.0, -3.0, -5.0], (len(t), 3))   # noqa: E731  3 m and more from the peer's plan
     job = _job(scenario, peers, plan_in_force=hovering)
     assert job.tracks_giving_way == (PEER,) and peers.counts["not_giving_way"] == 0
     # this drone's plan 0.8 m beside the peer's, all the way: bodies (0.5 m each) nearly touch
-    beside = lambda t: intent_means(intent, np.array([t]))[0] + np.array([0.0, -0.8, 0.0])   # noqa: E731
+    beside = lambda t: intent_means(intent, t) + np.array([0.0, -0.8, 0.0])   # noqa: E731
     job = _job(scenario, peers, plan_in_force=beside)
     assert job.tracks_giving_way == () and PEER in job.tracks_constrained
     assert job.tracks_along_intent == ()        # a lower-priority peer: its intent is not a fixed plan to us
