@@ -70,7 +70,6 @@ def test_that_the_identification_flight_against_the_px4_profile_identifies_its_t
 
 
 @pytest.mark.realtime
-@pytest.mark.quarantine(reason="new in the loop redesign; not yet 20 of 20 in make flake-check")
 def test_that_the_identification_flight_engages_mavsims_ardupilot_in_guided_and_identifies_it(capsys, tmp_path):
     """ArduPilot's engagement before the steps: streams requested, the EKF's readiness waited for (5 s on
     the ground), GUIDED before arming, the takeoff's param7 above home; steps in GUIDED, LOITER after."""

@@ -22,7 +22,7 @@ from tests.support.fault_proxy import Fault, FaultProxy
 from tests.support.fly_udp import fly_beside_mavsim
 from tests.support.ports import free_udp_port
 
-pytestmark = [pytest.mark.realtime, pytest.mark.quarantine(reason="new in the loop redesign; not yet 20 of 20 in make flake-check")]
+pytestmark = pytest.mark.realtime   # in .ci/run: 20 of 20 in make flake-check (docs/TESTING.md)
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "configs" / "antipodal.toml"
