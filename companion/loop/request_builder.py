@@ -224,10 +224,13 @@ class RequestBuilder:
         keys = list(tracker.keys())
         margin = self.settings.tracking_margin_m2 * np.eye(3)
         giving_way: list = []
+        giving_way_now: dict = {}     # key -> (mean (3,), cov (3, 3)) at t_v, predicted once
         if self.peers is not None:
             giving_way = [k for k in keys if self.peers.gives_way(k, t_v)]
             if giving_way:
-                giving_way = self._clear_of_plan(giving_way, tracker, times, t_v, plan_in_force, drone_covs + margin)
+                gm, gc = tracker.predict_many(giving_way, np.array([t_v]))
+                giving_way_now = {k: (m0, c0) for k, m0, c0 in zip(giving_way, gm[:, 0], gc[:, 0])}
+                giving_way = self._clear_of_plan(giving_way_now, times, t_v, plan_in_force, drone_covs + margin)
                 keys = [k for k in keys if k not in set(giving_way)]
         # every track's estimate read once, as arrays (row k for keys[k]), when they are set apart or ranked
         stack = tracker.stacked(keys) if len(keys) > self.settings.max_constrained_tracks or self.scenario.walls else None
@@ -251,10 +254,8 @@ class RequestBuilder:
                 if along is not None:
                     means[i], covs[i] = along
                     along_intent.append(key)
-            if giving_way:
-                gm, gc = tracker.predict_many(giving_way, np.array([t_v]))
-                for key, m0, c0 in zip(giving_way, gm[:, 0], gc[:, 0]):
-                    now_pos[key], now_cov[key] = m0, c0
+            for key in giving_way:
+                now_pos[key], now_cov[key] = giving_way_now[key]
         goal = self.goal.goal
         # an obstacle leads the way (and is followed under c_max) only if it stands in it: within both
         # bodies and both c_min reaches of the line to the goal
@@ -320,9 +321,12 @@ class RequestBuilder:
             tracks_along_intent=tuple(along_intent),
         )
 
-    def _clear_of_plan(self, giving_way: list, tracker, times: np.ndarray, t_v: float,
+    def _clear_of_plan(self, giving_way: dict, times: np.ndarray, t_v: float,
                        plan_in_force: Callable[[np.ndarray], np.ndarray | None] | None, safety_covs: np.ndarray) -> list:
         """The lower-priority peers of ``giving_way`` whose announced plans keep clear of this drone's plan.
+
+        ``giving_way`` maps each lower-priority peer's key to its track's (mean, covariance)
+        at ``t_v`` (NED m, m^2), predicted once by the caller.
 
         A peer that gives way plans around this drone's announced plan. When it cannot (its
         plan needed slack: it was boxed in, or met this drone too fast for its acceleration),
@@ -334,11 +338,10 @@ class RequestBuilder:
         """
         path = None if plan_in_force is None else plan_in_force(times)
         if path is None:
-            return giving_way
-        _, covs_now = tracker.predict_many(giving_way, np.array([t_v]))
+            return list(giving_way)
         floor = GIVE_WAY_FLOOR * self.cfg.c_min
         clear = []
-        for key, cov_now in zip(giving_way, covs_now[:, 0]):
+        for key, (_, cov_now) in giving_way.items():
             along = self.peers.along(key, times, cov_now, t_v)
             if along is not None:
                 contour = contour_of_touch(path, safety_covs, along[0], along[1],
