@@ -142,7 +142,8 @@ class Companion:
                                       fence=self.fence, peers=self.peers,
                                       right_of_way=_right_of_way(scenario) if fleet else None)
         self.executor = Executor(scenario.planner, 1.0 / self.settings.setpoint_rate_hz, self.planner.lag,
-                                 max_plan_age_s=self.settings.max_plan_age_s)
+                                 max_plan_age_s=self.settings.max_plan_age_s,
+                                 brake_accel_mps2=self.settings.brake_accel_mps2)
         self.state = CompanionState()
         #: the applied replans' records: every one, or the latest ``replan_history`` (a live flight)
         self.records: MutableSequence[ReplanRecord] = [] if replan_history is None else deque(maxlen=replan_history)

@@ -208,6 +208,10 @@ class LoopConfig:
         are chosen (:mod:`companion.loop.track_selection`), the rest counted and reported.
     max_plan_age_s : link seconds after its request past which a plan is no longer flown
         (the stream brakes within the acceleration bound until a newer plan arrives), in (0, 10].
+    brake_accel_mps2 : the stream's own braking (no valid plan, a plan too old or run out, a
+        stale estimate), m/s^2 per axis, in (0, 20]; None (default) brakes within ``[planner]
+        accel_max_mps2``. A vehicle that holds its last velocity when the stream stops
+        (ArduCopter: ``GUID_TIMEOUT``) may need a firmer brake than the planner's comfort bound.
 
     plan_lead_max_s : longest lead a real-time plan starts ahead of its request, s, in [0, 1]
         (0: from the request's state, as in lockstep); the lead follows the recent plans'
@@ -241,6 +245,7 @@ class LoopConfig:
     tracking_margin_m2: float = 0.0
     initial_velocity: str = "plan"
     max_plan_age_s: float = 1.0
+    brake_accel_mps2: float | None = None
     max_constrained_tracks: int = 8
     setpoint_kind: str = "velocity"
     timesync_hz: float = 2.0
@@ -262,6 +267,8 @@ class LoopConfig:
             raise ConfigError(f"response_state = 'observed' needs setpoint_kind = 'velocity' (the observer "
                               f"models the autopilot's velocity loop), got {self.setpoint_kind!r}")
         set_("max_plan_age_s", check.number("max_plan_age_s", self.max_plan_age_s, positive=True, hi=10.0))
+        if self.brake_accel_mps2 is not None:
+            set_("brake_accel_mps2", check.number("brake_accel_mps2", self.brake_accel_mps2, positive=True, hi=20.0))
         set_("plan_lead_max_s", check.number("plan_lead_max_s", self.plan_lead_max_s, lo=0.0, hi=1.0))
         set_("timesync_hz", check.number("timesync_hz", self.timesync_hz, lo=0.0, hi=50.0))
         set_("drift_window_s", check.number("drift_window_s", self.drift_window_s, lo=0.0, hi=10.0))

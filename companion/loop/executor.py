@@ -38,15 +38,20 @@ class Executor:
     config : PlannerConfig
         ``step_s``, ``horizon_steps``, ``accel_max`` and ``velocity_time_constant_s``.
     setpoint_period_s : float
-        Seconds between setpoints (the braking step is ``accel_max * setpoint_period_s``).
+        Seconds between setpoints (the braking step is the braking bound times this).
     lag : the planner's vehicle model (``Planner.lag``), for ``V_0`` of the next plan.
     max_plan_age_s : float
         Link seconds after its request past which a plan is no longer followed.
+    brake_accel_mps2 : float or None
+        Deceleration of :meth:`brake`, m/s^2 per axis; None: ``config.accel_max``.
     """
 
-    def __init__(self, config: PlannerConfig, setpoint_period_s: float, lag, max_plan_age_s: float = math.inf) -> None:
+    def __init__(self, config: PlannerConfig, setpoint_period_s: float, lag, max_plan_age_s: float = math.inf,
+                 brake_accel_mps2: float | None = None) -> None:
         self.cfg = config
         self._dt = float(setpoint_period_s)
+        self._brake_step = (np.asarray(config.accel_max, dtype=float) if brake_accel_mps2 is None
+                            else np.full(3, float(brake_accel_mps2))) * self._dt
         self._lag = lag
         self.max_plan_age_s = float(max_plan_age_s)
         self.plan: Plan | None = None
@@ -89,9 +94,8 @@ class Executor:
         return self.command
 
     def brake(self) -> np.ndarray:
-        """Velocity one setpoint period closer to zero, within the acceleration bound; returns the command."""
-        step = self.cfg.accel_max * self._dt
-        self.command = np.sign(self.command) * np.maximum(np.abs(self.command) - step, 0.0)
+        """Velocity one setpoint period closer to zero, within the braking bound; returns the command."""
+        self.command = np.sign(self.command) * np.maximum(np.abs(self.command) - self._brake_step, 0.0)
         return self.command
 
     def follow(self, t_s: float, t_v: float) -> tuple[np.ndarray, Follow]:

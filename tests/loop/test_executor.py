@@ -60,6 +60,31 @@ def test_that_without_a_plan_the_executor_brakes():
     assert why is Follow.NO_PLAN and cmd[0] == 1.0 - 0.5 * 0.05
 
 
+def test_that_a_configured_brake_decelerates_at_its_own_bound_not_the_planners():
+    cfg = PlannerConfig(horizon_steps=4, step_s=0.3, accel_max_mps2=(0.5, 0.5, 0.5))
+    ex = Executor(cfg, 0.05, Planner(cfg).lag, max_plan_age_s=1.0, brake_accel_mps2=1.0)
+    ex.command = np.array([2.0, -1.0, 0.02])
+    ticks = 0
+    while np.any(ex.command != 0.0):
+        cmd, why = ex.follow(0.0, 0.0)
+        ticks += 1
+        assert why is Follow.NO_PLAN
+    assert ticks == 40           # 2 m/s at 1 m/s^2 in 0.05 s steps (at the planner's 0.5: 80)
+    ex.command = np.array([2.0, -1.0, 0.0])
+    assert ex.brake().tolist() == pytest.approx([1.95, -0.95, 0.0])
+
+
+def test_that_the_companion_table_checks_the_brake_bound():
+    from companion.errors import ConfigError
+    from companion.loop.config import LoopConfig
+
+    assert LoopConfig().brake_accel_mps2 is None
+    assert LoopConfig(brake_accel_mps2=1).brake_accel_mps2 == 1.0
+    for bad in (0.0, -1.0, 25.0, "1", float("nan")):
+        with pytest.raises(ConfigError, match="brake_accel_mps2"):
+            LoopConfig(brake_accel_mps2=bad)
+
+
 class _PlanWithPath(_Plan):
     def __init__(self, commands, positions):
         super().__init__(commands)
