@@ -74,6 +74,14 @@ def available() -> bool:
     return _script() is not None and build_dir() is not None
 
 
+def present() -> bool:
+    """Whether a build is there (``start-arducopter`` and the tarball or its unpacked tree), without
+    unpacking it: what ``.ci/run`` and ``make flake-check`` ask before they run the ArduCopter stage."""
+    base = _shared()
+    tree = any((cand / "bin" / "arducopter").is_file() for cand in (base, base / "arducopter-sitl"))
+    return _script() is not None and (tree or (base / "arducopter-sitl.tar.gz").is_file())
+
+
 def _tcp_free(port: int) -> bool:
     s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     try:
@@ -202,3 +210,12 @@ class Sitl:
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+
+if __name__ == "__main__":      # `python -m tests.ardupilot.sitl --present`: exit 0 when a build is there
+    import sys
+
+    if sys.argv[1:] != ["--present"]:
+        print("usage: python -m tests.ardupilot.sitl --present", file=sys.stderr)
+        sys.exit(2)
+    sys.exit(0 if present() else 1)

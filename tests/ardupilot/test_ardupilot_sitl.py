@@ -47,10 +47,22 @@ def _show(result: dict) -> None:
     print(json.dumps({k: result.get(k) for k in keys} | {"companion": result.get("companion_report")}, indent=1, default=str))
 
 
-def test_that_the_companion_flies_arducopter_sitl_through_the_antipodal_encounter_hands_back_to_loiter_and_replays(tmp_path):
+def _record(record_property, result: dict) -> None:
+    """The flight's figures for ``make flake-check``'s table: its smallest true clearance (m) and one line."""
+    if result.get("min_true_clearance_m") is not None:
+        record_property("true_clearance_m", float(result["min_true_clearance_m"]))
+    report = result.get("companion_report") or {}
+    record_property("flight", f"outcome {report.get('outcome')} | goal {result.get('time_to_goal_s')} s after ENGAGED | "
+                              f"true clearance {result.get('min_true_clearance_m')} m | realised contour "
+                              f"{report.get('min_realised_contour')} | kept in {result.get('work')}")
+
+
+def test_that_the_companion_flies_arducopter_sitl_through_the_antipodal_encounter_hands_back_to_loiter_and_replays(
+        tmp_path, record_property):
     _need_sitl()
     result = fly_once(tmp_path / "flight", SCENARIO)
     _show(result)
+    _record(record_property, result)
     assert not result["companion_traceback"], (tmp_path / "flight" / "companion.stderr").read_text()[-3000:]
     assert result["engaged_after_start_s"] is not None and "GUIDED" in [m for _, m in result["modes"]]
     assert judge_takeoff(result) == [], result
@@ -74,6 +86,7 @@ def test_that_adsb_traffic_forwarded_by_arducopter_reaches_the_companion_and_the
     assert judge_safety(result) + judge_replay(result) + judge_encounter(result) == [], json.dumps(result, default=str)
 
 
+@pytest.mark.quarantine(reason="not yet through 20 rounds of make flake-check (the ArduCopter stage)")
 @pytest.mark.parametrize("trouble", ["lost_estimate", "stale_plan"])
 def test_that_on_trouble_the_companion_brakes_arducopter_and_hands_it_back_to_loiter(tmp_path, trouble):
     _need_sitl()

@@ -29,6 +29,7 @@ pytestmark = pytest.mark.ardupilot
 STICKS_AFTER_S = 90.0
 
 
+@pytest.mark.quarantine(reason="not yet through 20 rounds of make flake-check (the ArduCopter stage)")
 def test_that_identify_on_an_arducopter_sitl_flight_predicts_at_least_3x_better_than_the_lag(tmp_path):
     if not available():
         pytest.fail("no ArduCopter SITL build: set ARDUPILOT_SITL_DIR or put one at ../shared/ardupilot-sitl "

@@ -25,6 +25,7 @@ pytestmark = pytest.mark.ardupilot
 _PRELUDE = 'export PATH="{script_dir}:$PATH" ARDUPILOT_SITL_DIR="{build}"\n'
 
 
+@pytest.mark.quarantine(reason="not yet through 20 rounds of make flake-check (the ArduCopter stage)")
 def test_that_the_readme_fly_recipe_against_arducopter_sitl_works_as_written(tmp_path):
     if not available():
         pytest.fail("no ArduCopter SITL build: set ARDUPILOT_SITL_DIR or put one at ../shared/ardupilot-sitl")

@@ -1,4 +1,4 @@
-"""``make flake-check``: run CI's real-time and SITL stages N times and say which tests are steady.
+"""``make flake-check``: run CI's real-time and SITL stages (PX4, ArduCopter) N times and say which tests are steady.
 
 Each round runs every stage the way ``.ci/run`` does (one pytest process a stage, the stages one
 after another, nothing in parallel), with a JUnit XML report a stage. At the end one table: each
@@ -34,6 +34,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from tests.ardupilot.sitl import present as ardupilot_present
 from tests.px4.sitl import sitl_dir
 
 REPO = Path(__file__).resolve().parents[2]
@@ -43,7 +44,7 @@ STAGES: dict[str, list[str]] = {
     "realtime": ["-m", "realtime and not quarantine"],
     "px4": ["-s", "-m", "px4 and not quarantine", "tests/px4"],
     "quarantine": ["-m", "quarantine"],
-    "ardupilot": ["-s", "-m", "ardupilot and not ardupilot_adsb", "tests/ardupilot"],
+    "ardupilot": ["-s", "-m", "ardupilot and not ardupilot_adsb and not quarantine", "tests/ardupilot"],
     "mavproxy": ["-m", "mavproxy"],   # `make mavproxy-test`'s flights (MAVPROXY, or out/mavproxy-venv)
 }
 
@@ -138,7 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="flake_check", description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=20, help="rounds (default 20)")
     parser.add_argument("--stage", action="append", choices=sorted(STAGES),
-                        help="a stage to run (repeatable; default: realtime, and px4 when a PX4 SITL build is present)")
+                        help="a stage to run (repeatable; default: realtime, then px4 and ardupilot when their SITL "
+                             "builds are present, as .ci/run)")
     parser.add_argument("--stage-timeout", type=float, default=1800.0, help="seconds one stage run may take (default 1800)")
     parser.add_argument("-k", dest="keyword", metavar="EXPR",
                         help="only the stage's tests pytest's -k EXPR selects (to prove some tests of a stage)")
@@ -147,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.runs < 1:
         parser.error("--runs must be at least 1")
     env = dict(os.environ)
-    stages = args.stage or ["realtime"] + (["px4"] if sitl_dir() is not None else [])
+    stages = args.stage or (["realtime"] + (["px4"] if sitl_dir() is not None else [])
+                            + (["ardupilot"] if ardupilot_present() else []))
     args.out.mkdir(parents=True, exist_ok=True)
     rounds: list[list[dict]] = []
     for k in range(1, args.runs + 1):
