@@ -203,7 +203,8 @@ class LoopConfig:
         (:attr:`~companion.core.planner.request.PlanRequest.margin_cov`), m^2, in [0, 100]: how far the
         vehicle strays from a plan before the next replan starts from where it really is
         (measured against PX4: 0.1 to 0.27 m, docs/PX4.md). Not in the goal cost's metric and
-        not in the realised contour of touch, which is judged on the estimate alone.
+        not in the realised contour of touch, which is judged on the estimate alone. A fleet
+        peer's announced plan carries it too (the peer strays from its plan as much).
     max_constrained_tracks : most obstacle tracks one replan constrains, in [1, 64]; the riskiest
         are chosen (:mod:`companion.loop.track_selection`), the rest counted and reported.
     max_plan_age_s : link seconds after its request past which a plan is no longer flown

@@ -230,7 +230,7 @@ class RequestBuilder:
             if giving_way:
                 gm, gc = tracker.predict_many(giving_way, np.array([t_v]))
                 giving_way_now = {k: (m0, c0) for k, m0, c0 in zip(giving_way, gm[:, 0], gc[:, 0])}
-                giving_way = self._clear_of_plan(giving_way_now, times, t_v, plan_in_force, drone_covs + margin)
+                giving_way = self._clear_of_plan(giving_way_now, times, t_v, plan_in_force, drone_covs + margin, margin)
                 keys = [k for k in keys if k not in set(giving_way)]
         # every track's estimate read once, as arrays (row k for keys[k]), when they are set apart or ranked
         stack = tracker.stacked(keys) if len(keys) > self.settings.max_constrained_tracks or self.scenario.walls else None
@@ -250,7 +250,9 @@ class RequestBuilder:
         along_intent = []
         if self.peers is not None:
             for i, key in enumerate(constrained):
-                along = self.peers.predict(key, times, predicted_covs[i, 0], t_v)
+                # the peer strays from its plan in force as this drone does from its own: its
+                # intent carries the tracking margin too (a fleet flies one configuration)
+                along = self.peers.predict(key, times, predicted_covs[i, 0] + margin, t_v)
                 if along is not None:
                     means[i], covs[i] = along
                     along_intent.append(key)
@@ -322,7 +324,8 @@ class RequestBuilder:
         )
 
     def _clear_of_plan(self, giving_way: dict, times: np.ndarray, t_v: float,
-                       plan_in_force: Callable[[np.ndarray], np.ndarray | None] | None, safety_covs: np.ndarray) -> list:
+                       plan_in_force: Callable[[np.ndarray], np.ndarray | None] | None, safety_covs: np.ndarray,
+                       margin: np.ndarray) -> list:
         """The lower-priority peers of ``giving_way`` whose announced plans keep clear of this drone's plan.
 
         ``giving_way`` maps each lower-priority peer's key to its track's (mean, covariance)
@@ -332,7 +335,7 @@ class RequestBuilder:
         plan needed slack: it was boxed in, or met this drone too fast for its acceleration),
         its announced plan comes inside this drone's: the contour of touch between the two
         plans (this drone's covariances with the tracking margin, ``safety_covs`` (N, 3, 3) m^2;
-        the peer's as its intent predicts them) falls below ``GIVE_WAY_FLOOR * c_min`` at some
+        the peer's as its intent predicts them, with the same ``margin`` (3, 3) m^2) falls below ``GIVE_WAY_FLOOR * c_min`` at some
         step. Such a peer is planned around like any other (counted ``not_giving_way``), so
         the higher-priority drone moves too. Without a plan in force every peer keeps clear.
         """
@@ -342,7 +345,7 @@ class RequestBuilder:
         floor = GIVE_WAY_FLOOR * self.cfg.c_min
         clear = []
         for key, (_, cov_now) in giving_way.items():
-            along = self.peers.along(key, times, cov_now, t_v)
+            along = self.peers.along(key, times, cov_now + margin, t_v)
             if along is not None:
                 contour = contour_of_touch(path, safety_covs, along[0], along[1],
                                            self.cfg.drone_radius_m + self.obstacle_radius(key))

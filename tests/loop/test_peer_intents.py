@@ -142,3 +142,26 @@ def test_that_a_lower_priority_peer_whose_plan_comes_inside_ours_is_planned_arou
     # no plan in force yet (the first plan): the peer gives way as announced
     job = _job(scenario, peers, plan_in_force=lambda t: None)
     assert job.tracks_giving_way == (PEER,)
+
+
+def test_that_a_peer_along_its_intent_carries_the_tracking_margin_as_this_drone_does():
+    """Both vehicles stray from their plans in force between replans: the peer's announced plan
+    carries ``tracking_margin_m2`` too, in the safety rows only (the realised contour is judged
+    on the estimates alone), and an obstacle that is not a peer does not."""
+    import dataclasses
+
+    base = load_scenario(SCENARIO)
+    scenario = dataclasses.replace(base, companion=dataclasses.replace(base.companion, tracking_margin_m2=0.04))
+
+    def job(sc):
+        peers = PeerIntents(FleetConfig(coordination="distributed"), own_system=3)
+        peers.update(PEER, _turning(t0=10.0))
+        return _job(sc, peers)
+
+    without, with_margin = job(base), job(scenario)
+    assert with_margin.tracks_along_intent == (PEER,)
+    assert np.allclose(with_margin.request.margin_cov, 0.04 * np.eye(3))
+    extra = with_margin.request.obstacle_covs[0] - without.request.obstacle_covs[0]
+    assert np.allclose(extra, 0.04 * np.eye(3)[None])                           # every step
+    assert np.allclose(with_margin.request.obstacle_covs[1], without.request.obstacle_covs[1])
+    assert with_margin.realised_contour == without.realised_contour
