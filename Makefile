@@ -101,7 +101,7 @@ px4-fleet-test: $(STAMP)
 quarantine-test: $(STAMP)
 	PX4_SITL_DIR=$(PX4_SITL_DIR) ARDUPILOT_SITL_DIR=$(ARDUPILOT_SITL_DIR) $(VENV)/bin/pytest -q -m quarantine
 
-# CI's real-time and PX4 SITL stages N times, one after another, and a table of each test's passes.
+# CI's real-time and SITL stages (PX4, ArduCopter when present) N times, one after another, and a table of each test's passes.
 # FLAKE_ARGS='--stage quarantine' checks the quarantined tests instead (add -k EXPR for some of them). Reports in out/flake-check/.
 N ?= 20
 flake-check: $(STAMP)

@@ -33,6 +33,11 @@ SCRIPT = "start-arducopter"
 #: (a machine where other sessions fly instances 3 and 4)
 FIRST_INSTANCE = int(os.environ.get("ARDUPILOT_SITL_FIRST_INSTANCE", "3"))
 _unpacked: Path | None = None
+#: lines arducopter prints once its serial ports are open (its start took under a second in ~75
+#: starts; once it stopped after "Smoothing reset at 0.001", before opening any link, and the
+#: companion heard nothing for 150 s)
+STARTED_MARKERS = ("Validating structures", "Waiting for internal clock")
+START_TIMEOUT_S = 15.0
 
 
 def _shared() -> Path:
@@ -50,14 +55,22 @@ def _script() -> Path | None:
     return None
 
 
+def _unpacked_tree(base: Path) -> Path | None:
+    """``base`` or ``base/arducopter-sitl`` when it holds ``bin/arducopter``, else None."""
+    for cand in (base, base / "arducopter-sitl"):
+        if (cand / "bin" / "arducopter").is_file():
+            return cand
+    return None
+
+
 def build_dir() -> Path | None:
     """The unpacked ``arducopter-sitl`` directory (``bin/arducopter``), unpacking the tarball to a
     temporary directory when only it is there; None when there is no build."""
     global _unpacked
     base = _shared()
-    for cand in (base, base / "arducopter-sitl"):
-        if (cand / "bin" / "arducopter").is_file():
-            return cand
+    tree = _unpacked_tree(base)
+    if tree is not None:
+        return tree
     tarball = base / "arducopter-sitl.tar.gz"
     if not tarball.is_file():
         return None
@@ -78,8 +91,7 @@ def present() -> bool:
     """Whether a build is there (``start-arducopter`` and the tarball or its unpacked tree), without
     unpacking it: what ``.ci/run`` and ``make flake-check`` ask before they run the ArduCopter stage."""
     base = _shared()
-    tree = any((cand / "bin" / "arducopter").is_file() for cand in (base, base / "arducopter-sitl"))
-    return _script() is not None and (tree or (base / "arducopter-sitl.tar.gz").is_file())
+    return _script() is not None and (_unpacked_tree(base) is not None or (base / "arducopter-sitl.tar.gz").is_file())
 
 
 def _tcp_free(port: int) -> bool:
@@ -169,7 +181,29 @@ class Sitl:
     def gcs_port(self) -> int:
         return 14550 + self.instance
 
+    @property
+    def log_path(self) -> Path:
+        """The console output of the instance (``start-arducopter`` truncates it at every start)."""
+        return self.run_dir / "arducopter.log"
+
     def __enter__(self) -> Sitl:
+        """Start the instance and wait until it has opened its serial ports (:data:`STARTED_MARKERS` in
+        its console output, normally within a second); one that has not within :data:`START_TIMEOUT_S`
+        is stopped and started afresh once, with a warning. Raises RuntimeError when the second does
+        not start either, with the end of its console output."""
+        for attempt in (1, 2):
+            self._start()
+            if self._started(START_TIMEOUT_S):
+                return self
+            tail = self._log_tail()
+            self.stop()
+            if attempt == 1:
+                logger.warning("ArduCopter SITL instance %d did not open its ports within %.0f s (its console "
+                               "output ends %r); stopped, starting it again", self.instance, START_TIMEOUT_S, tail)
+        raise RuntimeError(f"ArduCopter SITL instance {self.instance} did not open its ports within "
+                           f"{START_TIMEOUT_S:.0f} s twice; {self.log_path} ends {tail!r}")
+
+    def _start(self) -> None:
         env = {**os.environ, "ARDUPILOT_SITL_DIR": str(self.build)}
         if self.params:
             env["ARDUCOPTER_PARAMS"] = " ".join(f"{k}={v}" for k, v in self.params.items())
@@ -179,7 +213,34 @@ class Sitl:
                              capture_output=True, text=True, timeout=60, env=env)
         self.pid = int(out.stdout.strip().splitlines()[-1])
         logger.info("ArduCopter SITL instance %d started, pid %d, in %s", self.instance, self.pid, self.run_dir)
-        return self
+
+    def _started(self, timeout_s: float) -> bool:
+        """Whether the console output shows a marker of :data:`STARTED_MARKERS` within ``timeout_s``
+        (False at once when the process has gone)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if any(m in self._log_head(65536) for m in STARTED_MARKERS):
+                return True
+            if not self.alive():
+                return False
+            time.sleep(0.1)
+        return False
+
+    def _log_head(self, size: int) -> str:
+        try:
+            with open(self.log_path, "rb") as f:
+                return f.read(size).decode("utf-8", "replace")
+        except OSError:
+            return ""
+
+    def _log_tail(self, size: int = 160) -> str:
+        try:
+            with open(self.log_path, "rb") as f:
+                f.seek(0, os.SEEK_END)
+                f.seek(max(0, f.tell() - size))
+                return f.read().decode("utf-8", "replace")
+        except OSError:
+            return ""
 
     def alive(self) -> bool:
         if self.pid is None:

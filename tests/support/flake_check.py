@@ -45,6 +45,7 @@ STAGES: dict[str, list[str]] = {
     "px4": ["-s", "-m", "px4 and not quarantine", "tests/px4"],
     "quarantine": ["-m", "quarantine"],
     "ardupilot": ["-s", "-m", "ardupilot and not ardupilot_adsb and not quarantine", "tests/ardupilot"],
+    "ardupilot_adsb": ["-s", "-m", "ardupilot_adsb and not quarantine", "tests/ardupilot"],   # not in .ci/run yet
     "mavproxy": ["-m", "mavproxy"],   # `make mavproxy-test`'s flights (MAVPROXY, or out/mavproxy-venv)
 }
 
