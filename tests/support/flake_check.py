@@ -44,8 +44,8 @@ STAGES: dict[str, list[str]] = {
     "realtime": ["-m", "realtime and not quarantine"],
     "px4": ["-s", "-m", "px4 and not quarantine", "tests/px4"],
     "quarantine": ["-m", "quarantine"],
-    "ardupilot": ["-s", "-m", "ardupilot and not ardupilot_adsb and not quarantine", "tests/ardupilot"],
-    "ardupilot_adsb": ["-s", "-m", "ardupilot_adsb and not quarantine", "tests/ardupilot"],   # not in .ci/run yet
+    "ardupilot": ["-s", "-m", "ardupilot and not quarantine", "tests/ardupilot"],
+    "ardupilot_adsb": ["-s", "-m", "ardupilot_adsb and not quarantine", "tests/ardupilot"],   # the ADS-B encounter alone
     "mavproxy": ["-m", "mavproxy"],   # `make mavproxy-test`'s flights (MAVPROXY, or out/mavproxy-venv)
 }
 
