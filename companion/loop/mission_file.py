@@ -19,6 +19,7 @@ is one :class:`~companion.errors.ConfigError` line naming the file and the field
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -92,6 +93,15 @@ def check_items(source: str, items: list[MissionItem]) -> None:
                 raise ConfigError(f"{where}: latitude/longitude/altitude {item.x}, {item.y}, {item.z} out of range")
             if item.command == mavlink2.MAV_CMD_NAV_WAYPOINT and item.x == 0.0 and item.y == 0.0:
                 raise ConfigError(f"{where}: a waypoint at latitude 0, longitude 0 (no position given)")
+        if item.command == mavlink2.MAV_CMD_DO_JUMP:
+            target, repeat = item.params[0], item.params[1]
+            if not (math.isfinite(target) and target == int(target) and 0 <= target < len(items)):
+                raise ConfigError(f"{where}: DO_JUMP to item {target:g}: no such item (the mission has items "
+                                  f"1 to {len(items)})")
+            if int(target) == item.seq:
+                raise ConfigError(f"{where}: DO_JUMP to itself")
+            if not (math.isfinite(repeat) and repeat == int(repeat) and repeat >= -1):
+                raise ConfigError(f"{where}: DO_JUMP repeat {repeat:g}: a whole number of times, or -1 for ever")
 
 
 def _read_text(path: Path) -> str:
@@ -164,6 +174,7 @@ def parse_plan(text: str, source: str = "<plan>", *, fence_only: bool = False) -
                                  x=0.0 if math.isnan(p[4]) else p[4], y=0.0 if math.isnan(p[5]) else p[5],
                                  z=0.0 if math.isnan(p[6]) else p[6],
                                  autocontinue=1 if raw.get("autoContinue", True) else 0))
+    items = _jumps_to_seq(source, items, [raw.get("doJumpId", i + 1) for i, raw in enumerate(raw_items)])
     if items or not fence_only:
         check_items(source, items)
     home = None
@@ -240,5 +251,25 @@ def parse_wpl(text: str, source: str = "<wpl>") -> MissionPlan:
             continue
         items.append(MissionItem(seq=len(items), frame=frame, command=command, params=(p1, p2, p3, p4),
                                  x=lat, y=lon, z=alt, current=0, autocontinue=autocontinue))
+    if home is not None:    # item numbers count home as item 0, as the file does
+        items = _jumps_to_seq(source, items, [i + 1 for i in range(len(items))])
     check_items(source, items)
     return MissionPlan(source, tuple(items), home)
+
+
+def _jumps_to_seq(source: str, items: list[MissionItem], numbers: list) -> list[MissionItem]:
+    """Items whose DO_JUMP targets, given in a file's own item numbers (``numbers[k]`` is item k's:
+    QGroundControl's ``doJumpId``, or a WPL line's seq where home is item 0), are the item seqs
+    the vehicle numbers them by (0 the first mission item); a number that names no item is an error."""
+    seq_of = {n: k for k, n in enumerate(numbers) if isinstance(n, int) and not isinstance(n, bool)}
+    out = []
+    for item in items:
+        if item.command == mavlink2.MAV_CMD_DO_JUMP and math.isfinite(item.params[0]):
+            target = item.params[0]
+            seq = seq_of.get(int(target)) if target == int(target) else None
+            if seq is None:
+                raise ConfigError(f"{source}: mission item {item.seq + 1} (MAV_CMD {item.command}): DO_JUMP to "
+                                  f"item {target:g}: no item has that number")
+            item = dataclasses.replace(item, params=(float(seq), *item.params[1:]))
+        out.append(item)
+    return out

@@ -19,8 +19,15 @@ mission (the loop's "goal reached"). What it does not fly itself:
   companion arms and no take-off altitude was given;
 - a final NAV_LAND or NAV_RETURN_TO_LAUNCH: the command sent to the autopilot once the
   vehicle has been handed back (Hold) after the last waypoint (:attr:`final_command`);
+- DO_JUMP (param1: the item seq jumped to, param2: how many times; -1: for ever, as
+  ArduPilot's; 0: never): followed when the waypoint before it is reached, so a mission that
+  jumps back to its first waypoint is a patrol flown until the run ends (``--duration``, a
+  signal). The leg after a jump starts at the waypoint reached, as any leg;
 - anything else (loiters, DO_CHANGE_SPEED and other DO_ items, a LAND or RTL that is not
   last): skipped, listed in :attr:`skipped` and said once (not yet supported).
+
+Memory does not grow with the flight: the report keeps the latest :data:`REACHED_KEPT`
+waypoints reached and counts them all (a patrol reaches one every few seconds for hours).
 
 Pure: link time (s) comes in as an argument.
 """
@@ -28,6 +35,7 @@ Pure: link time (s) comes in as an argument.
 from __future__ import annotations
 
 import logging
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +57,10 @@ logger = logging.getLogger(__name__)
 MISSION_MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT",
                               "MISSION_REQUEST", "MISSION_ACK"})
 _FINAL = {mavlink2.MAV_CMD_NAV_LAND: "land", mavlink2.MAV_CMD_NAV_RETURN_TO_LAUNCH: "return"}
+#: Waypoints reached kept for the run report (the latest; all are counted).
+REACHED_KEPT = 1000
+#: DO_JUMP's repeat count that never runs out (ArduPilot's convention).
+JUMP_FOREVER = -1
 
 
 @dataclass(frozen=True)
@@ -58,6 +70,19 @@ class Waypoint:
     seq: int
     position: np.ndarray
     acceptance_m: float
+
+
+@dataclass
+class Jump:
+    """A DO_JUMP placed after waypoint ``after`` (index into the waypoints; -1: before the first):
+    to waypoint index ``to`` (the first at or after the item jumped to), ``repeat`` times
+    (:data:`JUMP_FOREVER`: for ever); ``taken`` counts the jumps made."""
+
+    seq: int
+    after: int
+    to: int
+    repeat: int
+    taken: int = 0
 
 
 class MissionGoal:
@@ -85,17 +110,21 @@ class MissionGoal:
         self.items: list[MissionItem] | None = list(plan.items) if plan is not None and not self.upload else None
         self.transfer: MissionDownload | MissionUpload | None = None
         self.waypoints: list[Waypoint] = []
+        self.jumps: list[Jump] = []                     #: the mission's DO_JUMPs, in item order
         self.index = 0                                  #: the waypoint flown to now
+        self.next_index: int | None = None              #: the waypoint after it (None: it is the last)
         self.takeoff_alt_m: float | None = None         #: a NAV_TAKEOFF item's altitude above home
         self.final_command: int | None = None           #: a last NAV_LAND / NAV_RETURN_TO_LAUNCH
         self.skipped: list[tuple[int, int]] = []        #: (seq, command) of items not flown
-        #: waypoints reached, as (link time s, item seq), in order
-        self.reached_items: list[tuple[float, int]] = []
+        #: waypoints reached, as (link time s, item seq), in order: the latest REACHED_KEPT
+        self.reached_items: deque[tuple[float, int]] = deque(maxlen=REACHED_KEPT)
+        self.reached_count = 0                          #: every waypoint reached
+        self.finished = False                           #: the last waypoint reached
         self.failed: str | None = None
         self.route_start: np.ndarray | None = None
         self._target: tuple[int, int] | None = None
         self._wait_from: float | None = None
-        self._newly_reached: list[int] = []
+        self._newly_reached: list[tuple[int, int | None]] = []   # (seq reached, seq flown to next)
         self._current_sent = False
         self._final_sent = False
 
@@ -112,33 +141,51 @@ class MissionGoal:
     def target(self, position: np.ndarray) -> np.ndarray:
         if not self.waypoints:
             return np.asarray(position, dtype=float).copy()
-        while self.index < len(self.waypoints) - 1 and self._within(position, self.waypoints[self.index]):
-            self._reach(position)
+        for _ in range(len(self.waypoints)):   # bounded: waypoints within each other's acceptance
+            if self.next_index is None or not self._within(position, self.waypoints[self.index]):
+                break
+            self._reach()
         goal = self.waypoints[self.index].position
         start = self.route_start if self.route_start is not None else position
         return route_target(start, goal, position, self.mission.waypoint_spacing_m)
 
     def reached(self, position: np.ndarray) -> bool:
-        if not self.waypoints or self.index < len(self.waypoints) - 1:
+        if not self.waypoints or self.next_index is not None:
             return False
-        if len(self.reached_items) + len(self._newly_reached) == len(self.waypoints):
+        if self.finished:
             return True
-        if self._within(position, self.waypoints[-1]):
-            self._newly_reached.append(self.waypoints[-1].seq)
+        if self._within(position, self.waypoints[self.index]):
+            self._newly_reached.append((self.waypoints[self.index].seq, None))
+            self.finished = True
             return True
         return False
 
     def at_goal(self, position: np.ndarray) -> bool:
-        return bool(self.waypoints) and self._within(position, self.waypoints[-1])
+        return bool(self.waypoints) and self.next_index is None and self._within(position, self.waypoints[self.index])
 
     def _within(self, position: np.ndarray, wp: Waypoint) -> bool:
         return bool(np.linalg.norm(np.asarray(position) - wp.position) <= wp.acceptance_m)
 
-    def _reach(self, position: np.ndarray) -> None:
+    def _reach(self) -> None:
         wp = self.waypoints[self.index]
-        self._newly_reached.append(wp.seq)
+        assert self.next_index is not None
+        self._newly_reached.append((wp.seq, self.waypoints[self.next_index].seq))
         self.route_start = wp.position.copy()   # the next leg starts at the waypoint, as the autopilot flies it
-        self.index += 1
+        self._go_to(self.next_index)
+
+    def _go_to(self, index: int) -> None:
+        """Fly to waypoint ``index`` next, and settle now which comes after it (taking a jump counts it)."""
+        self.index = index
+        self.next_index = self._after(index)
+
+    def _after(self, index: int) -> int | None:
+        """The waypoint flown after waypoint ``index`` (-1: the first one): the first of the
+        DO_JUMPs after it that has jumps left (counted here), else the next waypoint."""
+        for jump in self.jumps:
+            if jump.after == index and (jump.repeat == JUMP_FOREVER or jump.taken < jump.repeat):
+                jump.taken += 1
+                return jump.to
+        return index + 1 if index + 1 < len(self.waypoints) else None
 
     # ------------------------------------------------------------------ preparation
 
@@ -204,6 +251,7 @@ class MissionGoal:
                                   f"companion: mission not placed, no {missing}"[:50])
             return Preparation(False)
         waypoints: list[Waypoint] = []
+        jumps: list[tuple[int, int, int, int]] = []   # (seq, after waypoint index, target seq, repeat)
         last = len(self.items) - 1
         for item in self.items:
             if item.command == mavlink2.MAV_CMD_NAV_WAYPOINT:
@@ -219,11 +267,22 @@ class MissionGoal:
                 self.takeoff_alt_m = item.z if item.frame in RELATIVE_FRAMES else item.z - (home.point.alt_m if home else origin.alt_m)
             elif item.command in _FINAL and item.seq == last:
                 self.final_command = item.command
+            elif item.command == mavlink2.MAV_CMD_DO_JUMP:
+                jumps.append((item.seq, len(waypoints) - 1, int(item.params[0]), int(item.params[1])))
             else:
                 self.skipped.append((item.seq, item.command))
         if not waypoints:
             return self._fail("the mission has no NAV_WAYPOINT item to fly", "companion: mission has no waypoint")
+        for seq, after, target, repeat in jumps:
+            to = next((k for k, w in enumerate(waypoints) if w.seq >= target), None)
+            if to is None:
+                return self._fail(f"mission item {seq}: DO_JUMP to item {target}, after which there is no waypoint",
+                                  "companion: mission DO_JUMP goes nowhere")
+            self.jumps.append(Jump(seq, after, to, repeat))
         self.waypoints = waypoints
+        first = self._after(-1)   # the first waypoint (or where a DO_JUMP before it goes)
+        assert first is not None
+        self._go_to(first)
         said = [(mavlink2.MAV_SEVERITY_INFO, f"companion: mission of {len(waypoints)} waypoints placed")]
         logger.info("mission placed: %s", [(w.seq, np.round(w.position, 2).tolist(), w.acceptance_m) for w in waypoints])
         if self.skipped:
@@ -249,16 +308,16 @@ class MissionGoal:
         if engaged and not self._current_sent:
             self._current_sent = True
             out.append(set_current(self.waypoints[0].seq, self._target))
-        for seq in self._newly_reached:
+        for seq, nxt in self._newly_reached:
             self.reached_items.append((t_s, seq))
+            self.reached_count += 1
             said.append((mavlink2.MAV_SEVERITY_INFO, f"companion: mission item {seq} reached"))
-            following = [w.seq for w in self.waypoints if w.seq > seq]
-            nxt = following[0] if following else (seq + 1 if seq + 1 < len(self.items or ()) else None)
+            if nxt is None:      # the last waypoint: the item after it that is not a DO_JUMP (a LAND, an RTL)
+                nxt = next((it.seq for it in (self.items or ())[seq + 1:] if it.command != mavlink2.MAV_CMD_DO_JUMP), None)
             if nxt is not None:
                 out.append(set_current(nxt, self._target))
         self._newly_reached = []
-        done = len(self.reached_items) == len(self.waypoints)
-        if done and held and self.final_command is not None and not self._final_sent:
+        if self.finished and held and self.final_command is not None and not self._final_sent:
             self._final_sent = True
             name = _FINAL[self.final_command]
             said.append((mavlink2.MAV_SEVERITY_INFO, f"companion: mission ends, {name} (autopilot)"))
@@ -267,10 +326,13 @@ class MissionGoal:
         return out, said
 
     def summary(self) -> dict:
-        """For the run report: the items reached (seq, link time) and those not flown."""
+        """For the run report: the items reached (seq, link time: the latest :data:`REACHED_KEPT`; and
+        how many in all), the DO_JUMPs taken and the items not flown."""
         return {
             "mission_items_reached": [seq for _, seq in self.reached_items],
             "mission_items_reached_t_s": [t for t, _ in self.reached_items],
+            "mission_items_reached_count": self.reached_count,
+            "mission_jumps_taken": sum(j.taken for j in self.jumps),
             "mission_waypoints": len(self.waypoints),
             "mission_items_skipped": [seq for seq, _ in self.skipped],
             "mission_final": _FINAL.get(self.final_command) if self.final_command else None,
