@@ -89,6 +89,8 @@ positive_seconds = _float_type(lambda v: v > 0.0, "be > 0 s", "A duration in sec
 non_negative_seconds = _float_type(lambda v: v >= 0.0, "be >= 0 s", "A duration in seconds, >= 0 (finite).")
 positive_number = _float_type(lambda v: v > 0.0, "be > 0", "A finite number > 0 (metres, a speed factor).")
 finite_number = _float_type(lambda v: True, "be finite", "Any finite number.")
+tlog_megabytes = _float_type(lambda v: v == 0.0 or v >= 0.1, "be 0 (no bound) or at least 0.1 MB",
+                             "A tlog's disk bound in MB (10^6 bytes): 0 for none, else at least 0.1.")
 
 
 #: Seeds are numpy SeedSequence entropy: non-negative; 2**63 - 1 keeps them one machine word.

@@ -22,6 +22,7 @@ from companion.commands._argtypes import (
     positive_number,
     positive_seconds,
     scenario_file,
+    tlog_megabytes,
 )
 from companion.commands._defaults import DEFAULT_URL, FORMULATIONS
 from companion.commands._flight_flags import goal_keywords, offboard_settings, planner_overrides
@@ -35,6 +36,8 @@ _PLANNER_START_S = 30.0
 #: Replan records a flight keeps (the latest; about 7 KB each, 3.3 a second: 90 s, 2 MB): the
 #: live view draws the newest, the report sums every replan (``Companion.tally``).
 REPLAN_HISTORY = 300
+#: The tlog's disk bound by default (MB): a 30 min flight writes about 60 MB (docs/REALTIME.md).
+TLOG_MAX_MB = 1000.0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -101,6 +104,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--formulation", default=None, choices=FORMULATIONS, help="planner formulation (overrides the scenario)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--tlog", type=output_file, default=None, help="record the link to this tlog")
+    p.add_argument("--tlog-max-mb", type=tlog_megabytes, default=TLOG_MAX_MB, metavar="MB",
+                   help=f"disk the tlog may take (MB): past it the tlog goes on in numbered files (flight.0001.tlog, "
+                        f"...) and the first and latest are kept (default {TLOG_MAX_MB:g}; 0: no bound)")
     p.add_argument("--duration", type=positive_seconds, default=None, metavar="S",
                    help="stop after S wall seconds (handing the vehicle back first, as on Ctrl-C)")
     p.add_argument("--hand-back-timeout", type=non_negative_seconds, default=5.0, metavar="S",
@@ -159,7 +165,8 @@ def run(args: argparse.Namespace) -> int:
     # with the monotonic clock: a step of the system clock (a time sync) moves nothing here
     microsecond_clock = SteadyUnixClock()
     with contextlib.ExitStack() as resources:  # each closed once, in reverse order, however the run ends
-        tlog = TlogWriter(args.tlog) if args.tlog else None  # the stream writes it, in handling order
+        tlog = (TlogWriter(args.tlog, max_bytes=int(args.tlog_max_mb * 1e6) if args.tlog_max_mb > 0 else None)
+                if args.tlog else None)  # the stream writes it, in handling order
         if tlog is not None:
             resources.callback(tlog.close)
         link = open_link(args.connect, clock=microsecond_clock, signing_key=signing_key)
@@ -240,6 +247,9 @@ def run(args: argparse.Namespace) -> int:
     report["stream_fifo_priority"] = stream_fifo
     report["signing"] = signing_key is not None
     report["signature_rejected"] = link.stats.signature_rejected
+    if tlog is not None:
+        report["tlog_bytes"] = tlog.bytes_written
+        report["tlog_segments_deleted"] = tlog.segments_deleted
     if args.json:
         print(json.dumps(report, indent=2, default=str))
     else:

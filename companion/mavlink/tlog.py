@@ -15,6 +15,7 @@ with pymavlink's parser; a damaged record stops the read naming its byte offset.
 
 from __future__ import annotations
 
+import glob
 import logging
 import math
 import os
@@ -44,16 +45,35 @@ class TlogError(CompanionError, ValueError):
     """A tlog could not be read: missing, empty, or not a tlog (the message names the file)."""
 
 
+#: Segments kept of a tlog with a size bound: the first and the latest ``TLOG_SEGMENTS - 1``.
+TLOG_SEGMENTS = 8
+
+
+def segment_path(path: Path, index: int) -> Path:
+    """Segment ``index`` of the tlog ``path``: the path itself for 0, else ``STEM.NNNN.SUFFIX``
+    (``flight.tlog`` -> ``flight.0001.tlog``: the segments sort in the order they were written)."""
+    return path if index == 0 else path.with_name(f"{path.stem}.{index:04d}{path.suffix}")
+
+
 class TlogWriter:
     """Append records to a tlog, flushing often enough that a killed process loses little.
+
+    With ``max_bytes`` the tlog takes at most that much disk: it is written in
+    :data:`TLOG_SEGMENTS` segments of ``max_bytes / TLOG_SEGMENTS`` each (split at record
+    boundaries, so every segment is a tlog of its own and ``cat`` joins them; see
+    :func:`segment_path` for their names), and once there are more, the oldest but the first
+    is deleted: the start of the flight (arming, engagement) and its latest stretch stay.
 
     Parameters
     ----------
     path : str or Path
-        File to create (truncated if it exists).
+        File to create (truncated if it exists; with ``max_bytes``, stale segments of an
+        earlier tlog of that name are removed).
     flush_period_s : float
         The file is flushed (and ``os.fsync``-free ``flush`` called) whenever
         this much log time has passed since the last flush, and on close.
+    max_bytes : int, optional
+        The bound on the segments kept, in bytes (None: one file, unbounded).
 
     Examples
     --------
@@ -61,14 +81,26 @@ class TlogWriter:
     ...     log.write(time.time(), packet_bytes)
     """
 
-    def __init__(self, path: str | os.PathLike, flush_period_s: float = 0.2) -> None:
+    def __init__(self, path: str | os.PathLike, flush_period_s: float = 0.2, max_bytes: int | None = None) -> None:
         if not (math.isfinite(flush_period_s) and flush_period_s >= 0.0):
             raise TlogError(f"flush_period_s must be finite and >= 0, got {flush_period_s!r}")
+        if max_bytes is not None and max_bytes < TLOG_SEGMENTS * MAX_PACKET_BYTES * 16:
+            raise TlogError(f"tlog {path}: max_bytes {max_bytes} is too small (at least "
+                            f"{TLOG_SEGMENTS * MAX_PACKET_BYTES * 16} bytes)")
         self.path = Path(path)
         self.flush_period_s = float(flush_period_s)
+        self.max_bytes = max_bytes
+        self.segment_bytes = None if max_bytes is None else max_bytes // TLOG_SEGMENTS
+        if max_bytes is not None:
+            for stale in self.path.parent.glob(f"{glob.escape(self.path.stem)}.[0-9][0-9][0-9][0-9]{glob.escape(self.path.suffix)}"):
+                stale.unlink(missing_ok=True)   # an earlier flight's segments would read as this one's
         self._file = open(self.path, "wb")  # noqa: SIM115 (closed in close())
         self._last_flush_s: float | None = None
         self.records = 0
+        self.bytes_written = 0          #: every byte written, in all segments (kept or not)
+        self.segment = 0                #: the segment being written
+        self.segments_deleted = 0       #: segments deleted to keep the bound
+        self._segment_size = 0
 
     def write(self, t_s: float, packet: bytes) -> None:
         """Write one record: ``t_s`` seconds since the Unix epoch, then the packet bytes.
@@ -82,13 +114,32 @@ class TlogWriter:
             raise TlogError(f"tlog {self.path} is closed")
         if not (math.isfinite(t_s) and t_s >= 0.0):
             raise TlogError(f"tlog {self.path}: record time must be finite seconds since the epoch, got {t_s!r}")
-        self._file.write(_STAMP.pack(int(round(t_s * 1e6))) + bytes(packet))
+        record = _STAMP.pack(int(round(t_s * 1e6))) + bytes(packet)
+        if self.segment_bytes is not None and self._segment_size + len(record) > self.segment_bytes:
+            self._next_segment()
+        self._file.write(record)
+        self._segment_size += len(record)
+        self.bytes_written += len(record)
         self.records += 1
         if self._last_flush_s is None:
             self._last_flush_s = t_s
         elif t_s - self._last_flush_s >= self.flush_period_s:
             self.flush()
             self._last_flush_s = t_s
+
+    def _next_segment(self) -> None:
+        """Close the segment being written, open the next, and delete the oldest but the first beyond the bound."""
+        self._file.close()
+        self.segment += 1
+        self._file = open(segment_path(self.path, self.segment), "wb")  # noqa: SIM115 (closed in close())
+        self._segment_size = 0
+        oldest = self.segment - (TLOG_SEGMENTS - 1)
+        if oldest >= 1:
+            segment_path(self.path, oldest).unlink(missing_ok=True)
+            self.segments_deleted += 1
+            if self.segments_deleted == 1:
+                logger.warning("tlog %s: more than %d bytes; keeping the first segment and the latest %d "
+                               "(older ones deleted from now on)", self.path, self.max_bytes, TLOG_SEGMENTS - 1)
 
     def flush(self) -> None:
         """Push buffered records to the operating system."""

@@ -173,3 +173,36 @@ def test_that_reading_a_large_corrupted_tlog_allocates_little_and_names_the_offs
     finally:
         tracemalloc.stop()
     assert peak < 1_000_000
+
+
+def test_that_a_bounded_tlog_keeps_the_first_and_latest_segments_within_its_bound(tmp_path):
+    from companion.mavlink.tlog import TLOG_SEGMENTS, segment_path
+    path = tmp_path / "flight.tlog"
+    (tmp_path / "flight.0042.tlog").write_bytes(b"an earlier flight's segment")
+    pkts = packets(256)
+    record = 8 + len(pkts[0])
+    bound = TLOG_SEGMENTS * 280 * 16                              # the smallest bound allowed
+    n = 40 * bound // record                                      # five times the bound's worth
+    with TlogWriter(path, max_bytes=bound) as log:
+        for i in range(n):
+            log.write(T0 + 0.01 * i, pkts[i % 256])
+    files = sorted(tmp_path.iterdir())
+    assert sum(f.stat().st_size for f in files) <= bound
+    assert log.bytes_written == n * record and log.segments_deleted == log.segment - (TLOG_SEGMENTS - 1) > 0
+    assert files == sorted([path] + [segment_path(path, k) for k in range(log.segment - TLOG_SEGMENTS + 2, log.segment + 1)])
+    first = list(read_tlog(path))                                 # the start, whole records, readable alone
+    assert first[0][0] == pytest.approx(T0) and len(first) == (bound // TLOG_SEGMENTS) // record
+    joined = tmp_path / "joined.tlog"                             # the latest segments join with cat
+    joined.write_bytes(b"".join(segment_path(path, k).read_bytes() for k in range(log.segment - 5, log.segment + 1)))
+    times = [t for t, _ in read_tlog(joined)]
+    assert times == sorted(times) and times[-1] == pytest.approx(T0 + 0.01 * (n - 1))
+    assert np.allclose(np.diff(times), 0.01, atol=1e-5)           # nothing lost between the latest segments
+
+
+def test_that_an_unbounded_tlog_is_one_file_and_a_tiny_bound_is_refused(tmp_path):
+    with TlogWriter(tmp_path / "a.tlog") as log:
+        for i, p in enumerate(packets(300)):
+            log.write(T0 + i, p)
+    assert [f.name for f in tmp_path.iterdir()] == ["a.tlog"] and log.segment == 0
+    with pytest.raises(TlogError, match="max_bytes 1000 is too small"):
+        TlogWriter(tmp_path / "b.tlog", max_bytes=1000)
