@@ -5,7 +5,7 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 BSTAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench campaign reliability campaign-test realtime-test crowd-test fault-campaign px4-test px4-fleet-test ardupilot-test ardupilot-adsb-test mavproxy-test quarantine-test flake-check venv clean
+.PHONY: demo test bench campaign reliability campaign-test realtime-test crowd-test fault-campaign px4-test px4-fleet-test ardupilot-test ardupilot-adsb-test mavproxy-test quarantine-test flake-check soak venv clean
 
 # PX4 SITL build with start-sih (see docs/PX4.md); `make px4-test` flies the companion against it.
 PX4_SITL_DIR ?= ../shared/px4-sitl
@@ -89,6 +89,12 @@ crowd-test: $(STAMP)
 # Every lockstep fault of docs/FAULTS.md on 20 seeds, judged in truth (not in `make test`).
 fault-campaign: $(STAMP)
 	$(VENV)/bin/python -m tests.support.fault_campaign --runs 20
+
+# The patrol (configs/patrol.toml) flown for 30 minutes in real time against mavsim: memory, gaps, replans,
+# tlog size (docs/REALTIME.md, "Long flights"; not in `make test` or .ci/run). SOAK_MIN=M for another length.
+SOAK_MIN ?= 30
+soak: $(STAMP)
+	$(VPY) -m tests.support.soak --minutes $(SOAK_MIN) --out out/soak --json out/soak/soak.json
 
 px4-test: $(STAMP)
 	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -s -m 'px4 and not quarantine' tests/px4
