@@ -36,7 +36,7 @@ _PLANNER_START_S = 30.0
 #: Replan records a flight keeps (the latest; about 7 KB each, 3.3 a second: 90 s, 2 MB): the
 #: live view draws the newest, the report sums every replan (``Companion.tally``).
 REPLAN_HISTORY = 300
-#: The tlog's disk bound by default (MB): a 30 min flight writes about 60 MB (docs/REALTIME.md).
+#: The tlog's disk bound by default (MB): the 30 min patrol of `make soak` writes 39.5 MB (docs/REALTIME.md).
 TLOG_MAX_MB = 1000.0
 
 
