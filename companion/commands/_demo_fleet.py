@@ -191,7 +191,8 @@ def _realtime(scenario: Path, drones: list[dict], args: argparse.Namespace, out:
                        "time_to_goal_s": None if v.get("time_to_goal_s") is None else round(v["time_to_goal_s"], 2),
                        "outcome": r.get("outcome"),
                        "setpoint_rate_hz": r.get("setpoint_rate_hz"), "setpoint_gap_max_ms": r.get("setpoint_gap_max_ms"),
-                       "stream_cpu_share": r.get("stream_cpu_share"), "cpu_share": r.get("cpu_share"),
+                       "stream_cpu_share": r.get("stream_cpu_share"), "stream_loops_per_s": r.get("stream_loops_per_s"),
+                       "cpu_share": r.get("cpu_share"),
                        "cpu_share_in_flight": r.get("cpu_share_in_flight"),
                        "max_rss_mb": r.get("max_rss_mb"), "replans_with_slack": r.get("replans_with_slack"),
                        "failed_plans": r.get("failed_plans")}

@@ -282,6 +282,11 @@ class Link(abc.ABC):
     def poll(self) -> list[Received]:
         """Every valid message that arrived since the last poll, in arrival order. Never blocks."""
 
+    def fileno(self) -> int | None:
+        """The file descriptor that turns readable when bytes arrive (a socket, a serial device),
+        or None (no descriptor: an in-memory link). The stream waits on it between polls."""
+        return None
+
     # ------------------------------------------------------------------ closing
 
     def close(self) -> None:
@@ -437,6 +442,10 @@ class MavutilLink(Link):
     @property
     def listens_only(self) -> bool:
         return self._server
+
+    def fileno(self) -> int | None:
+        fd = getattr(self._conn, "fd", None)   # pymavlink's udp, tcp and serial connections keep it
+        return fd if isinstance(fd, int) and fd >= 0 else None
 
     def destination(self) -> tuple | None:
         """Where a udpin link sends: the peer's last address; None (nothing is sent, it is

@@ -1,8 +1,9 @@
 """The real-time edge: wall clock, sleeping, a real link and the planning worker around the pure :class:`Companion`.
 
 Two processes. The *stream* (the caller of :func:`run_realtime`, one thread) polls the
-link often (inbound messages are stamped by the link's clock when they arrive) and ticks
-the companion at its setpoint rate. It is a scheduler over the loop's
+links whenever one has bytes, at most once every 2 ms, and sleeps otherwise
+(:mod:`companion.realtime.link_wait`; inbound messages are stamped by the link's clock when
+they are read), and ticks the companion at its setpoint rate. It is a scheduler over the loop's
 :class:`~companion.loop.driver.Driver`, which does what each call means (handle and answer a
 message, tick, send, record the tlog and its marks through a
 :class:`~companion.realtime.tlog_marks.TlogRecorder`); the stream decides only when, from the
@@ -29,6 +30,7 @@ priority are their own modules: :mod:`companion.realtime.backlog`,
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import logging
 import math
@@ -47,6 +49,7 @@ from companion.loop.app import Companion
 from companion.realtime.backlog import ObstacleBacklog
 from companion.realtime.collector import collector_for_real_time
 from companion.realtime.gap_probe import GapProbe
+from companion.realtime.link_wait import LinkWait
 from companion.loop.planning import PlanResult
 from companion.loop.request_builder import ReplanJob
 from companion.realtime.tlog_marks import TlogRecorder
@@ -351,6 +354,8 @@ class StreamStats:
     collections: int = 0
     max_collection_s: float = 0.0
     probe: GapProbe = field(default_factory=GapProbe)
+    waits_on_links: bool = False    #: waits between polls end when a link is readable (:mod:`~companion.realtime.link_wait`)
+    loops: int = 0                  #: passes of the loop (poll, maybe a tick, obstacle traffic, wait)
 
     def note_setpoint(self, t_s: float) -> None:
         gap = None if self.last_setpoint_s is None else t_s - self.last_setpoint_s
@@ -385,6 +390,8 @@ class StreamStats:
             "inbound_superseded": self.inbound_superseded,
             "obstacle_handling_share": round(self.obstacle_handling_s / self.wall_s, 3) if self.wall_s > 0 else None,
             "stream_cpu_share": round(self.cpu_s / self.wall_s, 3) if self.wall_s > 0 else None,
+            "stream_waits_on_links": self.waits_on_links,
+            "stream_loops_per_s": round(self.loops / self.wall_s, 1) if self.wall_s > 0 else None,
             # the largest gap's CPU time, run-queue wait, context switches and longest loop step
             "setpoint_gap_max_detail": self.probe.largest,
         }
@@ -464,12 +471,15 @@ def run_realtime(
     next_tick = start
     budget_s = obstacle_share * period  # obstacle handling left in this period
     handled_in_period = 0
-    with collector_for_real_time() as pauses:  # a full collection of the startup heap stopped the stream ~100 ms
+    waiter = LinkWait(links, sleep, poll_period_s)  # between polls: asleep until a link has bytes or a tick is due
+    stats.waits_on_links = waiter.on_descriptors
+    with collector_for_real_time() as pauses, contextlib.closing(waiter):  # a full collection of the startup heap stopped the stream ~100 ms
         while True:
             now = clock()
             if duration_s is not None and now - start >= duration_s:
                 break
             step_start = now
+            stats.loops += 1
             for rx in link.poll():  # the autopilot's messages at once (its first HEARTBEAT makes it known)
                 autopilot = companion.autopilot
                 if rx.msg.get_type() == "HEARTBEAT" or (autopilot is not None and rx.msg.get_srcSystem() == autopilot[0]):
@@ -512,7 +522,7 @@ def run_realtime(
                 t_prev = t_now
             stats.obstacles_handled_max = max(stats.obstacles_handled_max, handled_in_period)
             t_prev = clock()
-            sleep(max(0.0, min(poll_period_s, next_tick - t_prev)))
+            waiter.wait(next_tick - t_prev)
             stats.probe.step("sleep", clock() - t_prev)
     stats.wall_s = clock() - start
     stats.cpu_s = time.process_time() - cpu_start
