@@ -590,11 +590,16 @@ class OffboardSequencer:
             if self._ambiguous(t_s, hb) or self._flown_by_another(t_s, hb):
                 return
             found = f"autopilot {hb.key} found in {hb.mode or 'unknown mode'}"
-            if hb.armed and hb.role is ModeRole.HOLD and self.config.takeoff_alt_m is not None:
-                # already armed and holding: flying (a vehicle on the ground does not hold armed
-                # for long); a takeoff command would be ignored there, so it is skipped
+            critical = hb.system_status == mavlink2.MAV_STATE_CRITICAL
+            if hb.armed and (hb.role is ModeRole.HOLD or critical) and self.config.takeoff_alt_m is not None:
+                # already armed and holding, or armed in a failsafe (reached here only with
+                # ``reengage``: a restart finds PX4 in its offboard-loss RTL): flying. A vehicle
+                # on the ground does not hold armed for long; a takeoff command is ignored by a
+                # holding vehicle and would end PX4's RTL (measured on PX4 SITL: "Already higher
+                # than takeoff altitude", RTL -> AUTO.LOITER, and no takeoff to wait for), so
+                # it is skipped
                 self._seen_takeoff_mode = True
-                found += ", armed: already flying, no takeoff"
+                found += f", armed{' in a failsafe' if critical else ''}: already flying, no takeoff"
             self._transition(t_s, self._entry_phase(hb), found)
         elif phase is Phase.WAIT_READY:
             if self._ready and not self._ambiguous(t_s, hb):

@@ -251,6 +251,21 @@ def test_that_a_vehicle_found_armed_and_holding_is_not_asked_to_take_off_again()
     assert [m.command for _, m in s.sent] == []          # no arm, no takeoff, no HOME_POSITION request
 
 
+def test_that_a_vehicle_found_armed_in_a_failsafe_is_taken_back_from_a_hover_without_a_takeoff():
+    """A restart with ``--arm --takeoff-alt --reengage`` finds PX4 in its offboard-loss RTL
+    (armed, airborne, CRITICAL): no takeoff command (PX4 SITL answered one by ending its RTL
+    and the old sequencer then waited 30 s for a takeoff that never came), straight to the
+    prestream and OFFBOARD."""
+    from dataclasses import replace
+
+    seq = OffboardSequencer(OffboardConfig(arm=True, takeoff_alt_m=5.0, reengage=True))
+    seq.on_heartbeat(0.0, replace(hb(px4.AUTO_RTL), system_status=5))
+    actions = seq.step(0.0)
+    assert seq.phase is Phase.PRESTREAM and seq.state.streaming
+    assert "armed in a failsafe: already flying, no takeoff" in seq.state.reason
+    assert commands(actions) == []                    # no arm, no takeoff, no HOME_POSITION request
+
+
 def test_that_takeoff_waits_for_auto_loiter_before_prestreaming():
     def vehicle(s, msg):
         if msg.command == 400:
