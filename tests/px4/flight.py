@@ -24,6 +24,7 @@ import sys
 import threading
 import time
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -52,11 +53,16 @@ def companion_argv(*args: str) -> list[str]:
 
 
 def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] = (),
-             signal_after_offboard: tuple[int, float] | None = None) -> dict:
+             signal_after_offboard: tuple[int, float] | None = None,
+             during: Callable[[TrafficPlayer, Sitl], object] | None = None,
+             params: dict[str, float] | None = None) -> dict:
     """One flight; returns the figures (see the module docstring).
 
     ``signal_after_offboard = (signum, s)`` sends the companion that signal ``s`` seconds after
     PX4 entered OFFBOARD (an operator's Ctrl-C or systemd's SIGTERM mid-encounter).
+    ``during(player, sitl)`` runs in a thread beside the flight from the companion's start (a
+    fault injected into PX4); what it returns is the result's ``during``. ``params``: PX4's
+    boot parameters (default :data:`tests.px4.sitl.PARAMS`).
     """
     work.mkdir(parents=True, exist_ok=True)
     tlog = work / "flight.tlog"
@@ -68,7 +74,7 @@ def fly_once(work: Path, scenario: Path, seed: int = 0, extra: tuple[str, ...] =
     raise_priority()   # the player's thread too: its truth and obstacle stamps are wall-clock
     result["nice"] = os.getpriority(os.PRIO_PROCESS, 0)
     try:
-        _fly(work, scenario, seed, extra, tlog, result, signal_after_offboard)
+        _fly(work, scenario, seed, extra, tlog, result, signal_after_offboard, during, params)
     finally:
         try:
             os.setpriority(os.PRIO_PROCESS, 0, nice_before)
@@ -101,7 +107,9 @@ def _run_companion(cmd: list[str], player: TrafficPlayer,
 
 
 def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Path, result: dict,
-         signal_after_offboard: tuple[int, float] | None = None) -> None:
+         signal_after_offboard: tuple[int, float] | None = None,
+         during: Callable[[TrafficPlayer, Sitl], object] | None = None,
+         params: dict[str, float] | None = None) -> None:
     """The flight, its checks and the replay of :func:`fly_once`, filling ``result``. The
     obstacles and the ground truth are mavsim's traffic player (``mavsim traffic``), run in a
     thread of this process: it plays the scenario's obstacles on the companion's obstacle link
@@ -118,9 +126,17 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
             logger.exception("traffic player failed")
             errors.append(repr(exc))
 
-    with player, Sitl(work / "sih") as sitl:
+    with player, Sitl(work / "sih", params=params) as sitl:
         thread = threading.Thread(target=play, daemon=True)
         thread.start()
+        if during is not None:
+            def fault() -> None:
+                try:
+                    result["during"] = during(player, sitl)
+                except Exception as exc:  # reported by the test, never swallowed
+                    logger.exception("fault injection failed")
+                    errors.append(repr(exc))
+            threading.Thread(target=fault, daemon=True).start()
         try:
             proc = _run_companion(
                 companion_argv("fly", "--connect", "udpin:127.0.0.1:14540", "--scenario", str(scenario), "--arm",
@@ -142,6 +158,7 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
                                                              "goal_reached_companion_t_s", "replans",
                                                              "min_realised_contour", "replans_with_slack",
                                                              "failed_plans", "plan_status", "alerts",
+                                                             "estimator_resets", "plans_before_reset",
                                                              "planner_process", "inbound_superseded", "setpoint_gap_max_ms", "setpoint_gap_max_detail",
                                                              "setpoint_gap_max_at_s", "tick_max_ms", "stream_cpu_share", "stream_fifo_priority",
                                                              "vehicle_clock", "tracking_error", "drift_max_mps")}
