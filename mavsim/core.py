@@ -124,6 +124,12 @@ class Simulator:
             if np.any(cfg.velocity_bias_mps) else None
         self._Lv = noise_factor(cfg.velocity_noise_cov_m2ps2)
         self._resets = [(round(t * 1e6), np.array(step)) for t, step in cfg.estimator_resets]
+        # GPS outages: (start us, end us, drift velocity NED m/s), the drifts from their own stream
+        # so that adding an outage moves none of the other noises
+        gps_rng = np.random.default_rng([self.seed, 0x475053])
+        self._gps_outages = [(round(t * 1e6), round((t + d) * 1e6), cfg.gps_outage_drift_mps * gps_rng.standard_normal(3))
+                             for t, d in cfg.gps_outages]
+        self._gps_sd_growth_mps = cfg.gps_outage_sd_growth_mps
         self.vparams = VehicleParams(cfg.velocity_time_constant_s, cfg.accel_max_mps2,
                                      response=velocity_response(cfg.vehicle))
         self.vehicle = initial_state(scenario.start_ned_m, cfg.start_yaw_rad)
@@ -206,10 +212,27 @@ class Simulator:
             done = [step for t_us, step in self._resets if t_us <= self.now_us]
             if done:   # the estimator's resets so far: the estimate stepped, the counter counts them
                 position = position + np.sum(done, axis=0)
-            self.autopilot.tm.reset_counter = len(done) % 256
+            drift, outage_s, outages_ended = self._gps_outage(self.now_us)
+            position = position + drift
+            tm = self.autopilot.tm
+            tm.reset_counter = (len(done) + outages_ended) % 256   # each outage ends in a reset to the GPS
+            tm.gps_fix = outage_s is None
+            tm.extra_horizontal_var_m2 = 0.0 if outage_s is None else (self._gps_sd_growth_mps * outage_s) ** 2
             self._est = (position, velocity)
             self._est_t = self.now_us
         return self._est
+
+    def _gps_outage(self, now_us: int) -> tuple[np.ndarray, float | None, int]:
+        """The estimate's dead-reckoning drift now (NED m), how long the outage in progress has
+        lasted (s; None: the GPS is there) and how many outages have ended (``[sim] gps_outages``)."""
+        ended = 0
+        for start_us, end_us, velocity in self._gps_outages:
+            if now_us >= end_us:
+                ended += 1
+            elif now_us >= start_us:
+                tau = (now_us - start_us) * 1e-6
+                return velocity * tau, tau, ended
+        return np.zeros(3), None, ended
 
     @property
     def obstacles_started_s(self) -> float | None:

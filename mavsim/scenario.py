@@ -49,6 +49,21 @@ estimator_resets : list of [t_s, dn, de, dd], default none
     ``[dn, de, dd]`` (m, NED, each at most 100 m in size; the steps add up) and ODOMETRY's
     ``reset_counter`` counts one more, as PX4's EKF does when it resets its position (GPS lost
     and regained). The truth and the vehicle's motion do not jump.
+gps_outages : list of [t_s, duration_s], default none
+    GPS outages (at most 100, not overlapping): from simulated time ``t_s`` (s since boot) for
+    ``duration_s`` (0 < d < 5 s) the estimator dead-reckons, as PX4's EKF2 does without GPS:
+    the reported position drifts at a velocity drawn per outage (``gps_outage_drift_mps`` per
+    axis, 1-sigma; seeded), the horizontal variance reported in ODOMETRY grows by
+    ``(gps_outage_sd_growth_mps * tau)**2`` at ``tau`` s into the outage, and GPS_RAW_INT shows
+    no fix. When it ends the drift is gone at once and ODOMETRY's ``reset_counter`` counts one
+    more (PX4 resets its position to the GPS). Outages of 5 s or more are refused: PX4's own
+    limit on dead reckoning (``EKF2_NOAID_TOUT``, 5 s) then ends in its failsafe, not modelled.
+    Measured on PX4 SITL (docs/FAULTS.md): 1.6 to 3.6 m of drift and a reported deviation
+    from 0.14-0.17 m to 1.09-1.20 m over 5 s.
+gps_outage_drift_mps : float, default 0.4
+    The 1-sigma drift velocity of the estimate in an outage, per axis (m/s, 0 to 5).
+gps_outage_sd_growth_mps : float, default 0.2
+    How fast the reported horizontal standard deviation grows in an outage (m/s, 0 to 5).
 start_airborne : bool, default ``start_ned_m[2] < 0``
     Spawn in the air, hovering. With ``false`` the start point is put on the ground.
 start_armed : bool, default ``start_airborne``
@@ -170,6 +185,9 @@ class SimConfig:
     velocity_bias_mps: np.ndarray = field(default_factory=lambda: np.zeros(3))
     velocity_bias_period_s: float = 20.0
     estimator_resets: tuple[tuple[float, tuple[float, float, float]], ...] = ()
+    gps_outages: tuple[tuple[float, float], ...] = ()
+    gps_outage_drift_mps: float = 0.4
+    gps_outage_sd_growth_mps: float = 0.2
     start_airborne: bool = True
     start_armed: bool = True
     start_mode: str | None = None
@@ -262,6 +280,7 @@ MAX_MAP_ITEMS = 256
 SIM_KEYS = {
     "vehicle", "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2", "position_noise_correlation_s",
     "velocity_bias_mps", "velocity_bias_period_s", "estimator_resets",
+    "gps_outages", "gps_outage_drift_mps", "gps_outage_sd_growth_mps",
     "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
     "home_lat_deg", "home_lon_deg", "home_alt_m", "geoid_separation_m", "arming_delay_s", "offboard_reject_ack",
     "params", "stream_rates_hz",
@@ -385,20 +404,46 @@ def _velocity_bias(s: _Section) -> np.ndarray:
     return rate
 
 
-def _estimator_resets(s: _Section) -> tuple[tuple[float, tuple[float, float, float]], ...]:
-    """``estimator_resets``: rows ``[t_s, dn, de, dd]``, t_s >= 0, steps at most 100 m; sorted by time."""
-    if not s.has("estimator_resets"):
-        return ()
-    raw = s.table["estimator_resets"]
+def _timed_rows(s: _Section, key: str, columns: str) -> np.ndarray | None:
+    """``key``: at most 100 rows ``[columns]`` of finite numbers, the first a time; sorted by it
+    (None when the key is absent)."""
+    if not s.has(key):
+        return None
+    raw, width = s.table[key], len(columns.split(","))
     try:
-        a = np.array(raw, dtype=float).reshape(-1, 4) if isinstance(raw, list) and raw else None
+        a = np.array(raw, dtype=float).reshape(-1, width) if isinstance(raw, list) and raw else None
     except (TypeError, ValueError):
         a = None
     if a is None or len(a) != len(raw) or not np.all(np.isfinite(a)) or len(a) > 100:
-        raise s.err("estimator_resets", f"must be a list of at most 100 rows [t_s, dn, de, dd] of finite numbers, got {raw!r}")
+        raise s.err(key, f"must be a list of at most 100 rows [{columns}] of finite numbers, got {raw!r}")
+    return a[np.argsort(a[:, 0], kind="stable")]
+
+
+def _estimator_resets(s: _Section) -> tuple[tuple[float, tuple[float, float, float]], ...]:
+    """``estimator_resets``: rows ``[t_s, dn, de, dd]``, t_s >= 0, steps at most 100 m; sorted by time."""
+    a = _timed_rows(s, "estimator_resets", "t_s, dn, de, dd")
+    if a is None:
+        return ()
     if np.any(a[:, 0] < 0.0) or np.any(np.abs(a[:, 1:]) > 100.0):
         raise s.err("estimator_resets", "each t_s must be >= 0 and each step at most 100 m in size")
-    return tuple((float(r[0]), (float(r[1]), float(r[2]), float(r[3]))) for r in a[np.argsort(a[:, 0], kind="stable")])
+    return tuple((float(r[0]), (float(r[1]), float(r[2]), float(r[3]))) for r in a)
+
+
+#: Longest GPS outage modelled (s): PX4's EKF2_NOAID_TOUT; longer ones end in PX4's failsafe.
+GPS_OUTAGE_MAX_S = 5.0
+
+
+def _gps_outages(s: _Section) -> tuple[tuple[float, float], ...]:
+    """``gps_outages``: rows ``[t_s, duration_s]``, t_s >= 0, 0 < duration_s < 5, not overlapping; sorted."""
+    a = _timed_rows(s, "gps_outages", "t_s, duration_s")
+    if a is None:
+        return ()
+    if np.any(a[:, 0] < 0.0) or np.any(a[:, 1] <= 0.0) or np.any(a[:, 1] >= GPS_OUTAGE_MAX_S):
+        raise s.err("gps_outages", f"each t_s must be >= 0 and each duration_s in (0, {GPS_OUTAGE_MAX_S:g}) s "
+                    "(PX4's EKF2_NOAID_TOUT: longer outages end in its failsafe, not modelled)")
+    if np.any(a[1:, 0] < a[:-1, 0] + a[:-1, 1]):
+        raise s.err("gps_outages", "outages must not overlap")
+    return tuple((float(r[0]), float(r[1])) for r in a)
 
 
 def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
@@ -438,6 +483,9 @@ def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
         velocity_bias_mps=_velocity_bias(s),
         velocity_bias_period_s=s.number("velocity_bias_period_s", 20.0, positive=True, hi=3600.0),
         estimator_resets=_estimator_resets(s),
+        gps_outages=_gps_outages(s),
+        gps_outage_drift_mps=s.number("gps_outage_drift_mps", 0.4, lo=0.0, hi=5.0),
+        gps_outage_sd_growth_mps=s.number("gps_outage_sd_growth_mps", 0.2, lo=0.0, hi=5.0),
         start_airborne=airborne,
         start_armed=s.boolean("start_armed", airborne),
         start_mode=mode,

@@ -97,8 +97,22 @@ class TelemetryBuilder:
         self.home = (home_lat_deg, home_lon_deg, home_alt_m)
         self._cos_lat = math.cos(math.radians(home_lat_deg))
         self.geoid_separation_m = float(geoid_separation_m)
-        #: ODOMETRY's reset_counter: the estimator's resets so far (set by the simulator, ``[sim] estimator_resets``)
+        #: ODOMETRY's reset_counter: the estimator's resets so far (set by the simulator, ``[sim] estimator_resets``
+        #: and the ends of ``gps_outages``)
         self.reset_counter = 0
+        #: whether the GPS has a fix (False in a ``[sim] gps_outages`` outage: GPS_RAW_INT shows none)
+        self.gps_fix = True
+        #: variance added to ODOMETRY's reported x and y (m^2): the growth of a dead-reckoned estimate
+        self.extra_horizontal_var_m2 = 0.0
+
+    def _pose_cov_now(self) -> list[float]:
+        """ODOMETRY's pose covariance: the noise's, plus a dead-reckoning outage's growth in x and y."""
+        if self.extra_horizontal_var_m2 <= 0.0:
+            return self._pose_cov
+        cov = list(self._pose_cov)
+        cov[0] += self.extra_horizontal_var_m2   # x (row-major upper triangle of 6x6: x 0, y 6, z 11)
+        cov[6] += self.extra_horizontal_var_m2
+        return cov
 
     def global_from_local(self, p: np.ndarray) -> tuple[int, int, int]:
         """(lat degE7, lon degE7, alt mm AMSL) of a local NED point (flat earth)."""
@@ -124,7 +138,7 @@ class TelemetryBuilder:
         if msg_id == 331:
             roll, pitch = veh.roll_pitch_rad
             return odometry_message(now_us, est_pos, est_vel, _yaw_quat(roll, pitch, veh.yaw_rad),
-                                    (0.0, 0.0, veh.yaw_rate_radps), self._pose_cov, self._vel_cov, 8,
+                                    (0.0, 0.0, veh.yaw_rate_radps), self._pose_cov_now(), self._vel_cov, 8,
                                     self.reset_counter)
         if msg_id == 30:
             roll, pitch = veh.roll_pitch_rad
@@ -138,6 +152,8 @@ class TelemetryBuilder:
             lat, lon, alt = self.global_from_local(est_pos)
             speed = math.hypot(float(est_vel[0]), float(est_vel[1]))
             cog = round(math.degrees(math.atan2(est_vel[1], est_vel[0])) % 360.0 * 100) % 36000
+            if not self.gps_fix:   # an outage: no fix, nothing measured (unknown: UINT16_MAX)
+                return mavlink2.MAVLink_gps_raw_int_message(now_us, 1, 0, 0, 0, 65535, 65535, 65535, 65535, 0)
             return mavlink2.MAVLink_gps_raw_int_message(
                 now_us, 3, lat, lon, alt, 70, 100, round(speed * 100), cog, 12,
                 alt + round(self.geoid_separation_m * 1000), 700, 1000, 200, 0, 0)

@@ -1,0 +1,80 @@
+"""``[sim] gps_outages``: the estimator dead-reckons through a GPS outage, as PX4's EKF2 does.
+
+While an outage lasts the reported position drifts away from the truth at a seeded velocity, the
+horizontal variance ODOMETRY reports grows, and GPS_RAW_INT shows no fix; when it ends the drift
+is gone and ODOMETRY's ``reset_counter`` counts one more. Outages PX4 would not dead-reckon
+through (5 s or more: its failsafe) are refused.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from mavsim.lockstep import LockstepSimulator
+from mavsim.scenario import ScenarioError, scenario_from_dict
+
+START, LENGTH = 4.0, 4.0
+
+
+def _hover(seed: int, seconds: float = 10.0, **sim) -> list[tuple[float, object]]:
+    """(sim time s, message) of ODOMETRY and GPS_RAW_INT while hovering in AUTO.LOITER."""
+    scenario = {"vehicle": {"start_ned_m": [0.0, 0.0, -5.0]},
+                "sim": {"position_noise_cov_m2": (0.0001 * np.eye(3)).tolist(),
+                        "gps_outages": [[START, LENGTH]], "stream_rates_hz": {"GPS_RAW_INT": 5.0}, **sim}}
+    parser = mavlink2.MAVLink(None)
+    out = []
+    with LockstepSimulator(scenario, seed=seed) as sim:
+        truth = sim.truth.drone_position_ned_m.copy()
+        for _ in range(int(seconds / 0.1)):
+            for _, packet in sim.advance(0.1):
+                for msg in parser.parse_buffer(packet) or []:
+                    if msg.get_type() in ("ODOMETRY", "GPS_RAW_INT"):
+                        out.append((sim.time_s, msg))
+    return truth, out
+
+
+def test_that_an_outage_drifts_the_estimate_grows_the_reported_variance_and_ends_in_a_reset():
+    truth, out = _hover(seed=1)
+    odo = [(t, m) for t, m in out if m.get_type() == "ODOMETRY"]
+    before = [m for t, m in odo if t < START]
+    during = [(t, m) for t, m in odo if START + 0.5 <= t < START + LENGTH - 0.05]
+    after = [m for t, m in odo if t > START + LENGTH + 0.1]
+    err = lambda m: np.linalg.norm(np.array([m.x, m.y, m.z]) - truth)  # noqa: E731
+    assert max(err(m) for m in before) < 0.1 and max(err(m) for m in after) < 0.1
+    # a drift growing with time: linear in tau (a velocity), of the configured size
+    late = during[-1]
+    tau = late[0] - START
+    assert err(late[1]) > 0.05 * tau and err(late[1]) == pytest.approx(err(during[0][1]) * tau / (during[0][0] - START), rel=0.2)
+    # the reported horizontal deviation grows as 0.2 m/s by default; z unchanged
+    sd_x = np.sqrt(late[1].pose_covariance[0] - 1e-4)
+    assert sd_x == pytest.approx(0.2 * tau, rel=0.1) and late[1].pose_covariance[11] == pytest.approx(1e-4)
+    assert before[-1].pose_covariance[0] == pytest.approx(1e-4) and after[0].pose_covariance[0] == pytest.approx(1e-4)
+    assert {m.reset_counter for m in before} == {0} and {m.reset_counter for m in after} == {1}
+    gps = [(t, m.fix_type) for t, m in out if m.get_type() == "GPS_RAW_INT"]
+    assert {f for t, f in gps if START + 0.1 < t < START + LENGTH - 0.1} == {1}          # no fix
+    assert {f for t, f in gps if t < START - 0.1 or t > START + LENGTH + 0.1} == {3}
+
+
+def test_that_the_drift_is_seeded_and_moves_no_other_noise():
+    _, a = _hover(seed=2)
+    _, b = _hover(seed=2)
+    _, c = _hover(seed=3)
+    def pos(out, until_s=np.inf):
+        return [(m.x, m.y, m.z) for t, m in out if m.get_type() == "ODOMETRY" and t < until_s]
+
+    assert pos(a) == pos(b) and pos(a) != pos(c)
+    _, later = _hover(seed=2, gps_outages=[[100.0, 1.0]])   # the drift has its own stream: nothing else moves
+    assert len(pos(a, START)) > 100 and pos(later, START) == pos(a, START)
+    assert pos(later, START + 2.0)[-1] != pos(a, START + 2.0)[-1]      # in the outage: drifting
+
+
+@pytest.mark.parametrize("rows, why", [
+    ([[1.0, 5.0]], "duration_s in"), ([[1.0, 0.0]], "duration_s in"), ([[-1.0, 1.0]], "t_s must be"),
+    ([[1.0, 2.0], [2.5, 1.0]], "overlap"), ([[1.0]], "rows"), ("soon", "rows")])
+def test_that_bad_outages_are_refused_with_the_key_named(rows, why):
+    with pytest.raises(ScenarioError, match="gps_outages") as info:
+        scenario_from_dict({"sim": {"gps_outages": rows}})
+    assert why in str(info.value)
+    assert scenario_from_dict({}).sim.gps_outages == ()
