@@ -18,6 +18,7 @@ from companion.loop.executor import Executor, Follow
 from companion.loop.goal import GoalSource
 from companion.loop.perception import Perception
 from companion.loop.plan_cycle import PlanCycle
+from companion.loop.position_quality import PositionQuality
 from companion.loop.records import CompanionState, LoopMode
 from companion.loop.supervisor import SEV_NOTICE, SEV_WARNING, Supervisor
 from companion.mavlink import messages
@@ -35,6 +36,7 @@ class Commanding:
         self._plan_too_old = False  # braking for an old plan was announced
         self._braking_since: float | None = None  # link time the current braking (stale estimate, no plan) began
         self._reset_epoch = 0  # the perception's estimator reset epoch last acted on
+        self.position_quality = PositionQuality(settings.position_sd_warn_m)
 
     def released(self, t_s: float) -> Outbox:
         """Not streaming (nothing of ours in force): hold the executor, restart the response
@@ -77,7 +79,7 @@ class Commanding:
 
     def _engaged(self, t_s: float) -> tuple[np.ndarray, Outbox]:
         """The command while engaged: brake on a stale estimate or without a valid plan, else fly the plan."""
-        said: Outbox = self._after_reset(t_s)
+        said: Outbox = self._after_reset(t_s) + self._position_quality(t_s)
         t_v = self.perception.vehicle_time(t_s)
         est = self.perception.drone.state
         if t_v is None or est is None or t_v - est.t_s > self.settings.estimate_timeout_s:
@@ -121,6 +123,18 @@ class Commanding:
         self.cycle.replan_now()
         jump = float(np.linalg.norm(self.perception.resets[-1][1]))
         return [self.supervisor.say(t_s, SEV_WARNING, f"companion: estimator reset ({jump:.1f} m), replanning")]
+
+    def _position_quality(self, t_s: float) -> Outbox:
+        """Say when the autopilot's reported position becomes uncertain, and when it is certain
+        again (:mod:`companion.loop.position_quality`); the planner's margins follow the
+        reported covariance by themselves (``drone_covariance = "reported"``)."""
+        quality = self.position_quality
+        text = quality.update(self.perception.reported_cov)
+        self.state.position_uncertain_events = quality.events
+        self.state.reported_position_sd_max_m = quality.largest_sd_m
+        if text is None:
+            return []
+        return [self.supervisor.say(t_s, SEV_WARNING if quality.uncertain else SEV_NOTICE, text)]
 
     def braked_to_a_stop(self, t_s: float, engaged: bool, command: np.ndarray, limit_s: float | None) -> str | None:
         """Why to hand the vehicle back now, or None: the companion has braked (stale estimate, no

@@ -232,6 +232,11 @@ class LoopConfig:
         on the model fed with the velocity estimates and the setpoints sent
         (:class:`~companion.core.planner.response_observer.ResponseObserver`). Needs
         ``[planner] vehicle_response`` and ``setpoint_kind = "velocity"``.
+    position_sd_warn_m : the autopilot's reported position is uncertain (a GPS outage) when its
+        largest standard deviation reaches this, m, in (0, 100]: said once by STATUSTEXT while
+        engaged, and once when back below 0.7 of it (:mod:`companion.loop.position_quality`).
+        Only a reported covariance (PX4's ODOMETRY) is judged. Default 0.5 m: PX4 SITL reports
+        0.14-0.21 m with GPS, 1.1-1.2 m after 5 s without.
     setpoint_kind : ``"velocity"`` (default) streams the plan's velocity commands;
         ``"position_velocity"`` streams the plan's position with its velocity as feed-forward
         while tracking a plan (PX4's position loop removes the slow tail of its velocity response).
@@ -253,6 +258,7 @@ class LoopConfig:
     plan_lead_max_s: float = 0.25
     drift_window_s: float = 0.0
     response_state: str = "steady"
+    position_sd_warn_m: float = 0.5
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -273,6 +279,7 @@ class LoopConfig:
         set_("plan_lead_max_s", check.number("plan_lead_max_s", self.plan_lead_max_s, lo=0.0, hi=1.0))
         set_("timesync_hz", check.number("timesync_hz", self.timesync_hz, lo=0.0, hi=50.0))
         set_("drift_window_s", check.number("drift_window_s", self.drift_window_s, lo=0.0, hi=10.0))
+        set_("position_sd_warn_m", check.number("position_sd_warn_m", self.position_sd_warn_m, positive=True, hi=100.0))
         set_("max_constrained_tracks", check.integer("max_constrained_tracks", self.max_constrained_tracks, lo=1, hi=64))
 
 

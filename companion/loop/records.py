@@ -231,6 +231,10 @@ class CompanionState:
     old_plan_events: int = 0
     estimator_resets: int = 0      #: the autopilot's estimator resets acted on (plan dropped, replanned)
     plans_before_reset: int = 0    #: plans discarded on arrival: built from an estimate before a reset
+    #: times the autopilot's reported position became uncertain while engaged (``position_sd_warn_m``)
+    position_uncertain_events: int = 0
+    #: largest standard deviation of the autopilot's reported position while engaged (m); None: none reported
+    reported_position_sd_max_m: float | None = None
     obstacle_rejections: int = 0
     drone_rejections: int = 0
     messages_rejected: int = 0

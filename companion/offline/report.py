@@ -9,7 +9,7 @@ from companion.loop.records import describe_tracking
 
 #: What makes an event an alert: the companion braked (stale estimate, no valid plan, a plan
 #: too old), used safety slack, or lost control of the vehicle (pilot, link, gave up).
-_ALERT_WORDS = ("braking", "stale", "PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP", "slack used")
+_ALERT_WORDS = ("braking", "stale", "PILOT_TOOK_OVER", "LINK_LOST", "GAVE_UP", "slack used", "position uncertain")
 
 
 def companion_report(companion: Companion) -> dict:
@@ -44,6 +44,9 @@ def companion_report(companion: Companion) -> dict:
         "old_plan_events": state.old_plan_events,
         "estimator_resets": state.estimator_resets,
         "plans_before_reset": state.plans_before_reset,
+        "position_uncertain_events": state.position_uncertain_events,
+        "reported_position_sd_max_m": None if state.reported_position_sd_max_m is None
+        else round(state.reported_position_sd_max_m, 3),
         "tracks_unconstrained_max": state.tracks_unconstrained_max,
         "tracks_beyond_walls_max": state.tracks_beyond_walls_max,
         "messages_rejected": state.messages_rejected,

@@ -164,7 +164,7 @@ def _with_resets(resets, **sim) -> dict:
 
     with open(SCENARIO, "rb") as f:
         data = tomllib.load(f)
-    data["sim"].update(estimator_resets=resets, **sim)
+    data["sim"].update(**({"estimator_resets": resets} if resets else {}), **sim)
     return data
 
 
@@ -190,6 +190,33 @@ def test_that_an_estimator_reset_drops_the_plan_and_replans_from_the_new_positio
     assert origins.ticks_after_reset > 50 and origins.stale_frame_ticks == []
     for t_reset, t0 in origins.first_plan_after_reset:
         assert t_reset - 1e-9 <= t0 <= t_reset + 0.06, origins.first_plan_after_reset  # re-anchored at once
+    assert not s["collided"] and s["goal_reached"], s
+
+
+GPS_OUTAGE = [ENCOUNTER_S - 2.0, 4.0]   # 6 to 10 s: through the encounter, under PX4's 5 s limit
+
+
+def test_that_a_gps_outage_is_said_widens_the_margins_and_the_reset_after_it_is_replanned():
+    """mavsim's estimator dead-reckons for 4 s through the encounter (``[sim] gps_outages``): the
+    standard deviation it reports grows (the planner's margins with it), the companion says once
+    that the position is uncertain and once that it is certain again, and acts on the reset that
+    ends the outage; no collision in truth, the goal reached."""
+    origins = PlanOrigins()
+    result = run_lockstep(_with_resets([], gps_outages=[GPS_OUTAGE]), seed=0, duration_s=30.0, after_tick=origins)
+    s = result.summary()
+    events = result.companion.state.events
+    uncertain = [t for t, text in events if text.startswith("companion: position uncertain (sd ")]
+    certain = [t for t, text in events if text.startswith("companion: position certain again")]
+    reset = [t for t, text in events if "estimator reset" in text]
+    start, end = GPS_OUTAGE[0], GPS_OUTAGE[0] + GPS_OUTAGE[1]
+    assert len(uncertain) == 1 and start + 2.0 <= uncertain[0] <= start + 2.6, events   # sd 0.5 m at 2.4 s
+    assert len(reset) == 1 and reset[0] == pytest.approx(end, abs=0.06), events
+    assert len(certain) == 1 and certain[0] == pytest.approx(end, abs=0.06), events
+    assert s["position_uncertain_events"] == 1
+    assert s["reported_position_sd_max_m"] == pytest.approx(np.hypot(0.8, np.sqrt(0.02)), abs=0.02)
+    assert s["estimator_resets"] == 1 and origins.stale_frame_ticks == []
+    drone_covs = [r.drone_cov[0, 0] for r in result.companion.records if start + 3.0 <= r.t_vehicle_s < end]
+    assert drone_covs and min(drone_covs) > 0.3          # planned with the grown covariance, not the filter's
     assert not s["collided"] and s["goal_reached"], s
 
 

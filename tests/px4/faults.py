@@ -141,7 +141,7 @@ def judge_gps_outage(r: dict) -> list[str]:
     """The failed checks of a GPS-outage flight (docs/FAULTS.md, the GPS row).
 
     Always: no collision in SIH's truth, the replay exact, the outage real (PX4's reported
-    standard deviation at least doubled). Then one of PX4's two outcomes (a 5 s outage races
+    standard deviation at least doubled) and said (``companion: position uncertain``). Then one of PX4's two outcomes (a 5 s outage races
     PX4's own 5 s limit on dead reckoning, EKF2_NOAID_TOUT): PX4 dead-reckoned through it, and
     the companion acted on the reset when the GPS was back and flew to the goal, handing back to
     Hold without a failsafe; or PX4 declared its position invalid first and took the vehicle
@@ -157,6 +157,8 @@ def judge_gps_outage(r: dict) -> list[str]:
     if not std.get("largest_m") or not std.get("first_m") or std["largest_m"] < 2.0 * std["first_m"]:
         bad.append(f"PX4's reported position did not degrade: {std}")
     rc = r.get("companion_report") or {}
+    if not rc.get("position_uncertain_events"):
+        bad.append(f"the uncertain position was not said: {rc.get('reported_position_sd_max_m')} m at most")
     if r.get("companion_rc") == 7 and rc.get("outcome") == "autopilot failsafe":
         if not r.get("failsafe_texts"):
             bad.append("exit 7 without PX4's 'Failsafe activated'")

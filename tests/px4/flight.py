@@ -159,6 +159,7 @@ def _fly(work: Path, scenario: Path, seed: int, extra: tuple[str, ...], tlog: Pa
                                                              "min_realised_contour", "replans_with_slack",
                                                              "failed_plans", "plan_status", "alerts",
                                                              "estimator_resets", "plans_before_reset",
+                                                             "position_uncertain_events", "reported_position_sd_max_m",
                                                              "planner_process", "inbound_superseded", "setpoint_gap_max_ms", "setpoint_gap_max_detail",
                                                              "setpoint_gap_max_at_s", "tick_max_ms", "stream_cpu_share", "stream_fifo_priority",
                                                              "vehicle_clock", "tracking_error", "drift_max_mps")}
