@@ -126,6 +126,7 @@ class MissionGoal:
         self._wait_from: float | None = None
         self._newly_reached: list[tuple[int, int | None]] = []   # (seq reached, seq flown to next)
         self._current_sent = False
+        self._first_index = 0                           # the first waypoint flown (a DO_JUMP may skip some)
         self._final_sent = False
 
     # ------------------------------------------------------------------ GoalSource
@@ -283,6 +284,7 @@ class MissionGoal:
         first = self._after(-1)   # the first waypoint (or where a DO_JUMP before it goes)
         assert first is not None
         self._go_to(first)
+        self._first_index = first
         said = [(mavlink2.MAV_SEVERITY_INFO, f"companion: mission of {len(waypoints)} waypoints placed")]
         logger.info("mission placed: %s", [(w.seq, np.round(w.position, 2).tolist(), w.acceptance_m) for w in waypoints])
         if self.skipped:
@@ -298,16 +300,17 @@ class MissionGoal:
     # ------------------------------------------------------------------ progress
 
     def take_outbound(self, t_s: float, engaged: bool, held: bool) -> tuple[list, list[tuple[int, str]]]:
-        """What the mission sends and says at link time ``t_s``: the first waypoint made current once
-        engaged, each reached waypoint announced with the next made current, and the final LAND
-        or RTL once the vehicle is held after the last waypoint."""
+        """What the mission sends and says at link time ``t_s``: the first waypoint flown made current
+        once engaged (or where a DO_JUMP before it goes), each reached waypoint announced
+        with the next made current, and the final LAND or RTL once the vehicle is held after the
+        last waypoint."""
         out: list = []
         said: list[tuple[int, str]] = []
         if self._target is None or not self.waypoints:
             return out, said
         if engaged and not self._current_sent:
             self._current_sent = True
-            out.append(set_current(self.waypoints[0].seq, self._target))
+            out.append(set_current(self.waypoints[self._first_index].seq, self._target))
         for seq, nxt in self._newly_reached:
             self.reached_items.append((t_s, seq))
             self.reached_count += 1

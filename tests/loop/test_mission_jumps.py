@@ -96,6 +96,21 @@ def test_that_the_autopilots_current_item_follows_the_jump():
     assert currents == [1, 2, 3, 4, 2, 3, 4, 6]
 
 
+def test_that_a_jump_before_the_first_waypoint_makes_its_target_the_first_current_item():
+    """A DO_JUMP between the takeoff and the first waypoint (once, to the third): the first
+    waypoint flown is the jump's target, and that is the item made current at engagement."""
+    plan = plan_dict(SQUARE)
+    items = plan["mission"]["items"]
+    items.insert(1, {**_jump(4, 1), "doJumpId": 7})               # to doJumpId 4: the third waypoint
+    goal = _placed(plan)
+    assert goal.items[1].command == mavlink2.MAV_CMD_DO_JUMP and goal.items[1].params[0] == 4.0
+    goal.start(np.zeros(3))
+    first_goal = goal.goal.copy()
+    out, _ = goal.take_outbound(1.0, engaged=True, held=False)
+    assert [m.seq for m in out if m.get_type() == "MISSION_SET_CURRENT"] == [4]   # the third waypoint's seq
+    assert np.allclose(first_goal, goal.waypoints[2].position)
+
+
 def test_that_waypoints_all_within_each_others_acceptance_do_not_spin_the_loop():
     goal = _placed(plan_dict([(1.0, 0.0, -5.0), (1.2, 0.0, -5.0)], final=None, extra_items=[_jump(2, -1)]))
     goal.start(np.zeros(3))
