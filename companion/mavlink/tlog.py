@@ -55,6 +55,16 @@ def segment_path(path: Path, index: int) -> Path:
     return path if index == 0 else path.with_name(f"{path.stem}.{index:04d}{path.suffix}")
 
 
+def segment_files(path: Path) -> list[Path]:
+    """The segments of the tlog ``path`` on disk after the first (``STEM.NNNN.SUFFIX``), in the
+    order they were written; the path itself is not among them."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        return []
+    pattern = f"{glob.escape(path.stem)}.[0-9][0-9][0-9][0-9]{glob.escape(path.suffix)}"
+    return sorted(p for p in path.parent.glob(pattern) if p.is_file())
+
+
 class TlogWriter:
     """Append records to a tlog, flushing often enough that a killed process loses little.
 
@@ -92,7 +102,7 @@ class TlogWriter:
         self.max_bytes = max_bytes
         self.segment_bytes = None if max_bytes is None else max_bytes // TLOG_SEGMENTS
         if max_bytes is not None:
-            for stale in self.path.parent.glob(f"{glob.escape(self.path.stem)}.[0-9][0-9][0-9][0-9]{glob.escape(self.path.suffix)}"):
+            for stale in segment_files(self.path):
                 stale.unlink(missing_ok=True)   # an earlier flight's segments would read as this one's
         self._file = open(self.path, "wb")  # noqa: SIM115 (closed in close())
         self._last_flush_s: float | None = None

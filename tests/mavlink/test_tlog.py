@@ -206,3 +206,17 @@ def test_that_an_unbounded_tlog_is_one_file_and_a_tiny_bound_is_refused(tmp_path
     assert [f.name for f in tmp_path.iterdir()] == ["a.tlog"] and log.segment == 0
     with pytest.raises(TlogError, match="max_bytes 1000 is too small"):
         TlogWriter(tmp_path / "b.tlog", max_bytes=1000)
+
+
+def test_that_a_tlogs_segments_are_found_by_their_names_alone(tmp_path):
+    """``segment_files``: ``STEM.NNNN.SUFFIX`` beside the tlog, in writing order; not the tlog,
+    not another flight's log that shares the stem's start, not a directory."""
+    from companion.mavlink.tlog import segment_files, segment_path
+
+    path = tmp_path / "flight.tlog"
+    for p in (path, segment_path(path, 12), segment_path(path, 3), tmp_path / "flight2.tlog",
+              tmp_path / "flight.0007.tlog.bak", tmp_path / "flight.12.tlog"):
+        p.write_bytes(b"")
+    segment_path(path, 5).mkdir()
+    assert segment_files(path) == [segment_path(path, 3), segment_path(path, 12)]
+    assert segment_files(tmp_path / "nowhere" / "flight.tlog") == []

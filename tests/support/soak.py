@@ -30,6 +30,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from companion.mavlink.tlog import segment_files
 from tests.support.ports import free_port_run, wait_for_udp_listener
 
 REPO = Path(__file__).resolve().parents[2]
@@ -98,9 +99,8 @@ def tlog_bytes(tlog: Path) -> int:
 
 
 def _tlog_files(tlog: Path) -> list[Path]:
-    if not tlog.parent.exists():
-        return []
-    return sorted(p for p in tlog.parent.glob(f"{tlog.stem}*{tlog.suffix}") if p.is_file())
+    """The tlog and its kept segments on disk."""
+    return ([tlog] if tlog.is_file() else []) + segment_files(tlog)
 
 
 def _at(samples: list[Sample], t_s: float, key: str) -> int | None:
