@@ -31,7 +31,7 @@ from companion.core.fence import CircleZone, Fence, PolygonZone
 from companion.errors import ConfigError
 from companion.loop.goal import Preparation
 from companion.loop.mission_file import FenceCircle, FencePolygon, MissionPlan
-from companion.mavlink.mission_protocol import FENCE, MissionDownload, MissionItem
+from companion.mavlink.mission_protocol import DOWNLOAD_REPLIES, FENCE, MissionDownload, MissionItem
 from companion.loop.vehicle_reference import VehicleReference
 
 logger = logging.getLogger(__name__)
@@ -53,7 +53,7 @@ class FenceSource:
     """
 
     #: the mission-protocol messages a fence download takes (MISSION_ITEM for old autopilots' answers)
-    MISSION_MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_ACK"})
+    MISSION_MESSAGES = DOWNLOAD_REPLIES
 
     def __init__(self, plan: MissionPlan | None, reference: VehicleReference, wait_s: float, source: str = "fence") -> None:
         if plan is not None and not plan.polygons and not plan.circles:

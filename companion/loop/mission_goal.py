@@ -49,13 +49,12 @@ from companion.loop.vehicle_reference import VehicleReference
 from companion.errors import ConfigError
 from companion.mavlink import messages
 from companion.mavlink.mission_protocol import (
-    RELATIVE_FRAMES, MissionDownload, MissionItem, MissionUpload, set_current)
+    RELATIVE_FRAMES, VEHICLE_MESSAGES, MissionDownload, MissionItem, MissionUpload, set_current)
 
 logger = logging.getLogger(__name__)
 
 #: The autopilot's messages of the mission protocol (routed to the mission while it runs).
-MISSION_MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT",
-                              "MISSION_REQUEST", "MISSION_ACK"})
+MISSION_MESSAGES = VEHICLE_MESSAGES
 _FINAL = {mavlink2.MAV_CMD_NAV_LAND: "land", mavlink2.MAV_CMD_NAV_RETURN_TO_LAUNCH: "return"}
 #: Waypoints reached kept for the run report (the latest; all are counted).
 REACHED_KEPT = 1000

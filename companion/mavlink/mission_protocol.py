@@ -32,6 +32,17 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 logger = logging.getLogger(__name__)
 
+#: The vehicle's messages in a download (what answers MISSION_REQUEST_LIST and each item request;
+#: MISSION_ITEM for old autopilots).
+DOWNLOAD_REPLIES = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_ACK"})
+#: The vehicle's messages in an upload (its item requests and the final ack).
+UPLOAD_REQUESTS = frozenset({"MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"})
+#: Every message of the protocol a vehicle sends to a client.
+VEHICLE_MESSAGES = DOWNLOAD_REPLIES | UPLOAD_REQUESTS
+#: The client's answers, each sent on receipt of a vehicle's message: an upload's items, a
+#: download's item requests and its ack.
+CLIENT_ANSWERS = frozenset({"MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"})
+
 #: MAV_MISSION_TYPE
 MISSION = mavlink2.MAV_MISSION_TYPE_MISSION
 FENCE = mavlink2.MAV_MISSION_TYPE_FENCE

@@ -91,6 +91,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.mavlink.autopilots import DIALECT
 
 from companion.mavlink import messages
+from companion.mavlink.mission_protocol import CLIENT_ANSWERS
 from companion.core.planner import Planner
 from companion.loop.app import Companion
 from companion.loop.driver import Driver
@@ -616,7 +617,7 @@ def _report(path: Path, scenario_path: Path, records: list, parsed: _Parsed, tim
 #: The companion's mission-protocol answers, sent on receipt of the vehicle's messages (the upload's
 #: items, the download's item requests and ack). A log files them under a tick (an unmarked one stamps
 #: them like the tick's packets); the replay sends them on receipt too, so they are not compared.
-_MISSION_ANSWERS = frozenset({"MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"})
+_MISSION_ANSWERS = CLIENT_ANSWERS
 
 
 def _compared_types(sent: list) -> list[str]:
