@@ -90,10 +90,10 @@ def test_that_the_compiled_p_product_gives_scipys_bits():
     rng = np.random.default_rng(4)
     for update in range(2):
         for _ in range(200):
-            x = rng.normal(size=qp.p_full.shape[0]) * 10.0 ** rng.uniform(-6.0, 6.0, qp.p_full.shape[0])
+            x = rng.normal(size=qp.hessian.matrix.shape[0]) * 10.0 ** rng.uniform(-6.0, 6.0, qp.hessian.matrix.shape[0])
             x[rng.random(x.size) < 0.2] = rng.choice([0.0, -0.0])
-            assert qp.p_times(x).tobytes() == (qp.p_full @ x).tobytes()
-        before = qp.p_full.data.copy()
+            assert qp.p_times(x).tobytes() == (qp.hessian.matrix @ x).tobytes()
+        before = qp.hessian.matrix.data.copy()
         layout = next(iter(planner.workspaces.values())).layout
         qp.update(p_data=layout.p_data(rng.uniform(1.0, 9.0), rng.uniform(0.1, 2.0), np.diag(rng.uniform(1.0, 5.0, 3))))
-        assert not np.array_equal(qp.p_full.data, before)
+        assert not np.array_equal(qp.hessian.matrix.data, before)

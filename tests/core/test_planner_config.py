@@ -41,6 +41,7 @@ def test_that_defaults_are_valid_and_frozen():
         ({"slack_penalty": 0}, r"slack_penalty = 0 must be positive"),
         ({"scp_max_iterations": 0}, r"scp_max_iterations = 0 must be >= 1"),
         ({"solver_polish": "yes"}, r"solver_polish = 'yes' must be true or false"),
+        ({"solver": "gurobi"}, r"solver = 'gurobi' is not one of osqp, piqp"),
         ({"solver_rho": 0.0}, r"solver_rho = 0.0 must be positive"),
         ({"solver_max_iter": 0}, r"solver_max_iter = 0 must be >= 1"),
         ({"replan_work_budget": 199}, r"replan_work_budget = 199 must be >= 200"),

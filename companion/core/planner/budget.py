@@ -1,10 +1,13 @@
 """The compute budget of one replan, counted in solver work (never in wall time).
 
-A replan's work is the ADMM iterations of every QP it solves plus a fixed charge per QP
-solve (:data:`QP_SOLVE_WORK`) for what happens around the solver at each SCP iteration
-(linearisation, OSQP update and refactorisation, exact recheck). Because the count is a
-function of the request alone, a budgeted replan gives the same answer on any machine;
-its wall time is the count times the machine's cost per unit (measured in
+A replan's work is the iterations of every QP it solves, each worth its backend's
+``work_per_iteration`` units (OSQP: 1 per ADMM iteration; PIQP:
+:data:`companion.core.planner.piqp_qp.WORK_PER_ITERATION` per interior-point iteration,
+the ADMM iterations that take the same time), plus a fixed charge per QP solve
+(:data:`QP_SOLVE_WORK`) for what happens around the solver at each SCP iteration
+(linearisation, solver update, exact recheck). Because the count is a function of the
+request alone, a budgeted replan gives the same answer on any machine; its wall time is
+the count times the machine's cost per unit (measured in
 ``tests/benchmarks/bench_budget.py``).
 """
 
@@ -12,7 +15,7 @@ from __future__ import annotations
 
 import logging
 
-from companion.core.planner.osqp_qp import OsqpQp, QpSolution
+from companion.core.planner.osqp_qp import QpSolution
 
 logger = logging.getLogger(__name__)
 
@@ -38,7 +41,8 @@ class WorkBudget:
     used : int
         Work spent so far.
     admm_iterations : int
-        ADMM iterations spent so far (part of ``used``).
+        Solver iterations spent so far (ADMM for OSQP, interior-point for PIQP; times the
+        backend's ``work_per_iteration``, part of ``used``).
     qp_solves : int
         QPs solved so far.
     exhausted : bool
@@ -57,26 +61,30 @@ class WorkBudget:
         """Work units not yet spent."""
         return self.total - self.used
 
-    def solve(self, qp: OsqpQp, cap: int) -> QpSolution | None:
-        """Solve ``qp`` within ``cap`` ADMM iterations and what the budget has left; charge it.
+    def solve(self, qp, cap: int) -> QpSolution | None:
+        """Solve ``qp`` within ``cap`` work units and what the budget has left; charge it.
 
-        Returns None (and marks the budget exhausted) when fewer than
-        :data:`MIN_QP_ITERATIONS` are left. A QP that stops unsolved at a cap the budget
-        lowered also marks it exhausted: it stopped for the budget, not for itself.
+        ``qp`` is a backend (:class:`companion.core.planner.osqp_qp.OsqpQp` or
+        :class:`companion.core.planner.piqp_qp.PiqpQp`): its ``solve(max_iter)`` takes work
+        units and its ``work_per_iteration`` prices its iterations. Returns None (and marks
+        the budget exhausted) when fewer than :data:`MIN_QP_ITERATIONS` units (or one of the
+        backend's iterations) are left. A QP that stops unsolved at a cap the budget lowered
+        also marks it exhausted: it stopped for the budget, not for itself.
         """
+        unit = int(qp.work_per_iteration)
         left = self.total - self.used - QP_SOLVE_WORK
-        if left < min(cap, MIN_QP_ITERATIONS):
+        if left < max(unit, min(cap, MIN_QP_ITERATIONS)):
             self.exhausted = True
             return None
         grant = min(cap, left)
         sol = qp.solve(max_iter=grant)
-        self.charge(sol.iterations)
-        if grant < cap and not sol.accurate and sol.iterations >= grant:
+        self.charge(sol.iterations, unit)
+        if grant < cap and not sol.accurate and (sol.iterations + 1) * unit > grant:
             self.exhausted = True
         return sol
 
-    def charge(self, iterations: int) -> None:
-        """Account one QP solve of ``iterations`` ADMM iterations."""
-        self.used += QP_SOLVE_WORK + int(iterations)
+    def charge(self, iterations: int, unit: int = 1) -> None:
+        """Account one QP solve of ``iterations`` solver iterations worth ``unit`` work units each."""
+        self.used += QP_SOLVE_WORK + int(iterations) * int(unit)
         self.admm_iterations += int(iterations)
         self.qp_solves += 1

@@ -25,6 +25,10 @@ logger = logging.getLogger(__name__)
 #: the overlap of Gaussians; ``deterministic`` and ``bhattacharyya`` are baselines.
 FORMULATIONS: tuple[str, ...] = ("hyperplane", "paper", "deterministic", "bhattacharyya")
 
+#: Selectable QP backends (docs/SOLVERS.md): OSQP (ADMM, warm-started) and PIQP (proximal
+#: interior point; :mod:`companion.core.planner.piqp_qp`).
+SOLVERS: tuple[str, ...] = ("osqp", "piqp")
+
 #: Smallest ``replan_work_budget``: one QP solve plus a few dozen ADMM iterations.
 MIN_WORK_BUDGET = 200
 
@@ -161,23 +165,27 @@ class PlannerConfig:
         Box trust region on each velocity component around the previous iterate, m/s.
     trust_region_lam : float
         Box trust region on the overlap parameters ``lam`` (``paper`` only).
+    solver : str
+        The QP backend: ``osqp`` (the default; ADMM, warm-started from the previous QP) or
+        ``piqp`` (proximal interior point, no warm start; a flatter time per QP, docs/SOLVERS.md).
     solver_eps : float
-        OSQP ``eps_abs``.
+        ``eps_abs`` of the backend (its primal and dual residual tolerance).
     solver_eps_rel : float
-        OSQP ``eps_rel``. The dual tolerance is ``eps_abs + eps_rel * max(|Px|, |A'y|, |q|)``;
+        ``eps_rel`` of the backend. The dual tolerance is ``eps_abs + eps_rel * max(|Px|, |A'y|, |q|)``;
         when the slack penalty sits in ``q`` (soft re-solve only, see ``scp``) it loosens
         with the penalty. The rows carry a back-off (``formulations.BACKOFF_SIGMA``) that
         covers the primal tolerance, so returned plans meet ``c_min`` exactly.
     solver_polish : bool
-        Whether OSQP polishes its solution (active-set refinement).
+        Whether OSQP polishes its solution (active-set refinement; OSQP only).
     solver_max_iter : int
-        ADMM iterations allowed to the hard QP and to each least-violation QP before the
+        Work units (ADMM iterations for OSQP; PIQP's iterations cost
+        :data:`companion.core.planner.piqp_qp.WORK_PER_ITERATION` each) allowed to the hard QP and to each least-violation QP before the
         planner moves on (the last-resort soft QP gets 10,000). Unscaled OSQP took 10,000
         iterations without declaring an infeasible hard QP infeasible (measured in closed
         loop); warm-started hard QPs that solve need a few hundred, cold ones about a
         thousand (planner benchmark). Tighter ``solver_eps`` needs more.
     solver_rho : float
-        OSQP's initial ADMM step size, restored before every QP of the SCP (see
+        OSQP's initial ADMM step size (OSQP only), restored before every QP of the SCP (see
         :mod:`companion.core.planner.osqp_qp`, which gives why 0.4).
     replan_work_budget : int
         Compute budget of one replan in work units, never wall time, so a replan's
@@ -214,6 +222,7 @@ class PlannerConfig:
     scp_max_iterations: int = 15
     trust_region_mps: float = 1.0
     trust_region_lam: float = 0.25
+    solver: str = "osqp"
     solver_eps: float = 1e-4
     solver_eps_rel: float = 1e-4
     solver_polish: bool = False
@@ -224,6 +233,7 @@ class PlannerConfig:
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
         check.choice("formulation", self.formulation, FORMULATIONS)
+        check.choice("solver", self.solver, SOLVERS)
         set_("horizon_steps", check.integer("horizon_steps", self.horizon_steps, lo=2, hi=MAX_HORIZON_STEPS))
         for name in ("step_s", "replan_period_s"):
             value = check.number(name, getattr(self, name), positive=True)

@@ -46,9 +46,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import osqp
-import scipy.sparse as sp
 
-from companion.core import jit
+from companion.core.planner.full_hessian import FullHessian
 from companion.core.planner.qp_layout import QpLayout
 
 logger = logging.getLogger(__name__)
@@ -117,13 +116,7 @@ class OsqpQp:
         self._rho = rho
         self._rho_adapted = False
         self._max_iter = MAX_ITER
-        # the full symmetric P (to evaluate x'Px) has a fixed pattern too: build it once from
-        # markers 1..nnz and refill its data by index on every update (no sparse arithmetic)
-        markers = np.arange(1.0, len(p_data) + 1.0)
-        self.p_full = self._symmetric(layout.p_matrix(markers))
-        self._p_full_source = self.p_full.data.astype(np.intp) - 1
-        self.p_full.data[:] = p_data[self._p_full_source]
-        self._p_indptr, self._p_indices = self.p_full.indptr.astype(np.intp), self.p_full.indices.astype(np.intp)
+        self.hessian = FullHessian(layout, p_data)     # the full P, for the objective's x'Px
         self._solver = osqp.OSQP()
         self._solver.setup(
             layout.p_matrix(p_data), q, layout.a_matrix_csc(a_data), l, u,
@@ -133,19 +126,18 @@ class OsqpQp:
         self._direct = _extension_solver(self._solver)
         self._infinity = float(self._solver.constant("OSQP_INFTY"))
 
+    #: Work units per iteration of this backend (:mod:`companion.core.planner.budget`): one per ADMM iteration.
+    work_per_iteration = 1
+
     def p_times(self, x: np.ndarray) -> np.ndarray:
         """``P x`` with the full symmetric ``P`` (the objective's ``x'Px``), summed as scipy's CSR product sums it."""
-        if not jit.available():
-            return self.p_full @ x
-        out = np.empty(self.p_full.shape[0])
-        _csr_product()(self._p_indptr, self._p_indices, self.p_full.data, np.ascontiguousarray(x, dtype=float), out)
-        return out
+        return self.hessian.times(x)
 
     def update(self, *, p_data: np.ndarray | None = None, q: np.ndarray | None = None,
                a_data: np.ndarray | None = None, l: np.ndarray | None = None, u: np.ndarray | None = None) -> None:
         """Update data in place (same pattern); ``None`` leaves a piece unchanged."""
         if p_data is not None:
-            np.take(p_data, self._p_full_source, out=self.p_full.data)
+            self.hessian.update(p_data)
         vectors = q is not None or l is not None or u is not None
         matrices = p_data is not None or a_data is not None
         ext = self._direct
@@ -160,11 +152,6 @@ class OsqpQp:
                                 u=None if u is None else np.minimum(u, self._infinity))
         if matrices:
             ext.update_data_mat(P_x=p_data, P_i=None, A_x=a_data, A_i=None)
-
-    @staticmethod
-    def _symmetric(p_upper: sp.csc_matrix) -> sp.csr_matrix:
-        """Full symmetric ``P`` from its upper triangle (to evaluate ``x'Px``)."""
-        return sp.csr_matrix(p_upper + sp.triu(p_upper, k=1).T)
 
     def warm_start(self, x: np.ndarray | None = None, y: np.ndarray | None = None) -> None:
         """Set the starting primal (and dual) point of the next solve."""
@@ -200,23 +187,6 @@ class OsqpQp:
             accurate=status in _SOLVED, iterations=int(info.iter), solve_time_s=float(info.solve_time),
             update_time_s=float(info.update_time),
         )
-
-
-def _csr_product_signature(t):
-    """CSR index arrays (intp), data and a vector in, the product out."""
-    index = t.Array(t.intp, 1, "C", readonly=True)
-    return t.void(index, index, jit.readonly(t, 1), jit.readonly(t, 1), t.float64[::1])
-
-
-@jit.lazy(_csr_product_signature)
-def _csr_product(indptr, indices, data, x, out):
-    """``out = A x`` for a CSR ``A``: each row summed from +0 over its entries in stored order,
-    as scipy's ``csr_matvec`` does (so the same bits), without scipy's Python dispatch."""
-    for i in range(out.shape[0]):
-        acc = 0.0
-        for k in range(indptr[i], indptr[i + 1]):
-            acc += data[k] * x[indices[k]]
-        out[i] = acc
 
 
 #: What :class:`OsqpQp` calls on the extension's solver (osqp 1.x's ``OSQPSolver``).

@@ -19,10 +19,15 @@ from companion.core.planner.budget import WorkBudget
 from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import LAM_EPS, Formulation, ObstacleRows, relax_out_of_range
 from companion.core.planner.osqp_qp import MAX_ITER, OsqpQp, QpSolution
+from companion.core.planner.piqp_qp import PiqpQp
 from companion.core.planner.qp_data import RequestData, RequestTemplate
 from companion.core.planner.qp_vectors import read_solution, write_rows
+from companion.errors import InputError
 
 logger = logging.getLogger(__name__)
+
+#: The QP backend of each ``[planner] solver``.
+BACKENDS = {"osqp": OsqpQp, "piqp": PiqpQp}
 
 #: A slack above this (units of its row) means the constraint it relaxes is violated.
 SLACK_TOL = 1e-4
@@ -92,7 +97,7 @@ class QpWorkspace:
     ----------
     layout : the fixed QP pattern.
     template : the request-independent part of every request's constants (this shape and configuration).
-    qp : the OSQP solver (set up at the first solve of this shape), or None.
+    qp : the QP solver (``[planner] solver``: OSQP or PIQP; set up at the first solve of this shape), or None.
     a_slot, l, u : ``A`` data in slot order and the bounds, rewritten per QP.
     x0 : the primal start of the QP (the linearisation point, slacks 0).
     last_y : duals of the last QP solved for this shape (the next replan's warm start).
@@ -103,7 +108,7 @@ class QpWorkspace:
     def __init__(self, template: RequestTemplate) -> None:
         layout = template.layout
         self.layout, self.template = layout, template
-        self.qp: OsqpQp | None = None
+        self.qp: OsqpQp | PiqpQp | None = None
         self.a_slot = np.empty_like(layout.a_data0)
         self.l = np.empty(layout.m)
         self.u = np.empty(layout.m)
@@ -177,7 +182,9 @@ def solve_qp(cfg: PlannerConfig, formulation: Formulation, ws: QpWorkspace, data
     if ws.recorder is not None:          # off by default (qp_record): tags the QPs recorded
         ws.recorder.scp_step(first)
     if qp is None:
-        make = OsqpQp if ws.recorder is None else ws.recorder.solver
+        if ws.recorder is not None and cfg.solver != "osqp":
+            raise InputError(f"the QP recorder records OSQP's solves; [planner] solver is {cfg.solver!r}")
+        make = ws.recorder.solver if ws.recorder is not None else BACKENDS[cfg.solver]
         qp = ws.qp = make(layout, data.p_data, data.q_hard, a_data, l, u, eps=cfg.solver_eps,
                       eps_rel=cfg.solver_eps_rel, polish=cfg.solver_polish, rho=cfg.solver_rho)
     else:
