@@ -12,6 +12,8 @@ from __future__ import annotations
 DEFAULT_URL = "udpin:0.0.0.0:14540"
 #: companion.core.planner.config.FORMULATIONS
 FORMULATIONS: tuple[str, ...] = ("hyperplane", "paper", "deterministic", "bhattacharyya")
+#: companion.core.planner.config.SOLVERS
+SOLVERS: tuple[str, ...] = ("osqp", "piqp")
 #: companion.offline.campaign.generate.METHODS
 METHODS = ("hyperplane", "paper", "deterministic", "bhattacharyya")
 #: companion.offline.campaign.generate.FAMILIES

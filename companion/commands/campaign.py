@@ -37,6 +37,7 @@ from companion.commands._defaults import (
     MAX_EPISODES,
     METHODS,
     PROGRESS_MODES,
+    SOLVERS,
     VEHICLES,
     WORKERS_PER_CPU,
 )
@@ -97,6 +98,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="mavsim's vehicle profile: lag (0.3 s lag, the planner's own model), px4 (PX4's velocity "
                         "loop against drag) or ardupilot (ArduCopter's jerk-limited shaping, flown by mavsim's ArduPilot personality: the "
                         "companion engages it in GUIDED); the planner uses the response identified for it")
+    p.add_argument("--solver", choices=SOLVERS, default="osqp",
+                   help="the planner's QP backend ([planner] solver; docs/SOLVERS.md)")
     p.add_argument("--results", metavar="FILE", default=None,
                    help="results file (JSON lines, one finished run per line, appended as runs finish; "
                         "default: beside --json with the suffix .jsonl, else campaign-FAMILY-seedS.jsonl; "
@@ -155,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
     result = run_campaign(args.family, episodes, args.methods, args.seed, workers=args.workers, c_min=args.c_min,
                           duration_s=args.duration, progress=args.progress, results_path=store, resume=args.resume,
                           scheduler=args.scheduler, noise_correlation_s=args.noise_correlation,
-                          vehicle=args.vehicle)
+                          vehicle=args.vehicle, solver=args.solver)
     print(format_table(result))
     if store is not None:
         print(f"results: {store}")
@@ -185,6 +188,7 @@ def _run_swap(args: argparse.Namespace) -> int:
         raise ConfigError(f"--methods: {', '.join(wrong)} is not a coordination mode; --family swap flies "
                           f"{', '.join(COORDINATION_MODES)}")
     for flag, used in (("--vehicle", args.vehicle != "lag"), ("--noise-correlation", args.noise_correlation > 0.0),
+                       ("--solver", args.solver != "osqp"),
                        ("--plot", args.plot), ("--save-scenario", args.save_scenario)):
         if used:
             raise ConfigError(f"{flag} is not available with --family swap")

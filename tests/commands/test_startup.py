@@ -25,6 +25,7 @@ HEAVY = ("numpy", "scipy", "filterpy", "osqp", "numba", "pymavlink", "matplotlib
 SOURCES = {
     "DEFAULT_URL": ("companion.mavlink.link", "DEFAULT_URL"),
     "FORMULATIONS": ("companion.core.planner.config", "FORMULATIONS"),
+    "SOLVERS": ("companion.core.planner.config", "SOLVERS"),
     "METHODS": ("companion.offline.campaign.generate", "METHODS"),
     "FAMILIES": ("companion.offline.campaign.generate", "FAMILIES"),
     "VEHICLES": ("companion.offline.campaign.generate", "VEHICLES"),

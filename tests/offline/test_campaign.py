@@ -463,3 +463,33 @@ def test_that_an_ardupilot_results_file_flown_against_px4s_personality_refuses_t
     now = campaign_header("antipodal", 1, 0.9, 40.0, vehicle="ardupilot", response_state="observed", autopilot="ardupilot")
     with pytest.raises(ConfigError, match="autopilot"):
         ResultsFile(path, now, resume=True)
+
+
+def test_that_a_campaign_flies_the_planner_backend_it_is_given_and_its_file_says_so(tmp_path):
+    """``--solver piqp``: every run plans with PIQP (its work counts PIQP's iterations, not OSQP's), the
+    results file's header names it (an OSQP file does not resume under it, and OSQP files from before
+    still do), and an unknown backend is one clear error."""
+    from companion.core.planner import scp
+    from companion.core.planner.piqp_qp import PiqpQp
+    from companion.offline.campaign.store import ResultsFile
+
+    seen = []
+    solve = scp.Planner.solve
+
+    def spy(self, request, warm_start=None):
+        plan = solve(self, request, warm_start)
+        seen.append(type(next(iter(self.workspaces.values())).qp))
+        return plan
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(scp.Planner, "solve", spy)
+        result = run_episode(EpisodeTask("antipodal", 1, 0, "hyperplane", duration_s=SHORT_S, solver="piqp"))
+    assert result.error is None and seen and set(seen) == {PiqpQp}
+    assert campaign_header("antipodal", 1, 0.9, 40.0, solver="piqp")["solver"] == "piqp"
+    assert "solver" not in campaign_header("antipodal", 1, 0.9, 40.0)       # OSQP files from before still resume
+    path = tmp_path / "osqp.jsonl"
+    ResultsFile(path, campaign_header("antipodal", 1, 0.9, 40.0)).close()
+    with pytest.raises(ConfigError, match="solver"):
+        ResultsFile(path, campaign_header("antipodal", 1, 0.9, 40.0, solver="piqp"), resume=True)
+    with pytest.raises(InputError, match="solver = 'gurobi' is not one of osqp, piqp"):
+        run_campaign("antipodal", [0], ["hyperplane"], 1, workers=1, solver="gurobi")

@@ -1,6 +1,7 @@
 """Flying a campaign: each (episode, method) run in lockstep, on a local process pool or a Dask cluster.
 
-A run is a pure function of ``(family, seed, index, method, c_min, duration_s)``
+A run is a pure function of ``(family, seed, index, method, c_min, duration_s)`` (and the
+noise correlation, the vehicle profile and the planner's QP backend)
 (:class:`EpisodeTask`): the encounter and the simulator seed come from ``(seed, index)``,
 so a run gives the same result in this process, in a pool worker or on another machine
 (timing fields aside). Finished runs are appended to the results file as they complete
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
+from companion.core.planner.config import SOLVERS
 from companion.errors import ConfigError, InputError, LinkError
 from companion.offline.campaign.generate import (DEFAULT_DURATION_S, FAMILIES, MAX_DURATION_S, METHODS, episode_sim_seed,
                                                 generate_scenario, profile_autopilot, profile_response_state)
@@ -62,6 +64,7 @@ class EpisodeTask:
     duration_s: float = DEFAULT_DURATION_S
     noise_correlation_s: float = 0.0
     vehicle: str = "lag"
+    solver: str = "osqp"
 
 
 def run_episode(task: EpisodeTask, *, keep_records: bool = False) -> EpisodeResult:
@@ -77,7 +80,7 @@ def run_episode(task: EpisodeTask, *, keep_records: bool = False) -> EpisodeResu
         data = generate_scenario(task.family, task.seed, task.index, c_min=task.c_min, duration_s=task.duration_s,
                                  noise_correlation_s=task.noise_correlation_s, vehicle=task.vehicle)
         run = run_lockstep(data, seed=key["sim_seed"], stop_after_goal_s=STOP_AFTER_GOAL_S, formulation=task.method,
-                           autopilot=profile_autopilot(task.vehicle))
+                           autopilot=profile_autopilot(task.vehicle), solver=task.solver)
         return EpisodeResult(**key, score=score_run(run, data), wall_time_s=time.perf_counter() - t0,
                              run=run if keep_records else None)
     except Exception as exc:  # one bad episode must not end a campaign of hundreds
@@ -217,7 +220,7 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
                  workers: int | None = None, c_min: float = 0.90, duration_s: float = DEFAULT_DURATION_S,
                  progress: bool | str | None = None, results_path: str | Path | None = None, resume: bool = False,
                  scheduler: str | None = None, noise_correlation_s: float = 0.0,
-                 vehicle: str = "lag") -> CampaignResult:
+                 vehicle: str = "lag", solver: str = "osqp") -> CampaignResult:
     """Fly ``episodes`` (indices) of a ``family`` campaign with every method.
 
     Parameters
@@ -233,6 +236,7 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
     noise_correlation_s : correlation time of mavsim's drone position error and obstacle measurement errors (s; 0: white).
     vehicle : mavsim's vehicle profile, ``"lag"``, ``"px4"`` or ``"ardupilot"`` (see :func:`generate_scenario`);
         ``"ardupilot"`` also flies mavsim's ArduPilot personality (:func:`profile_autopilot`).
+    solver : the planner's QP backend (``[planner] solver``: ``"osqp"`` or ``"piqp"``).
     """
     if family not in FAMILIES:
         raise InputError(f"unknown campaign family {family!r} (known: {', '.join(FAMILIES)})")
@@ -244,6 +248,8 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
         raise InputError(f"a campaign has at most {MAX_EPISODES} episodes, indices 0 to {MAX_EPISODES - 1}")
     if not (math.isfinite(duration_s) and 0.0 < duration_s <= MAX_DURATION_S):
         raise InputError(f"duration_s = {duration_s!r} must be > 0 and at most {MAX_DURATION_S:g} s")
+    if solver not in SOLVERS:
+        raise InputError(f"solver = {solver!r} is not one of {', '.join(SOLVERS)}")
     if workers is not None and not 1 <= workers <= max_workers():
         raise InputError(f"workers = {workers!r} must be from 1 to {max_workers()} "
                          f"({WORKERS_PER_CPU} per CPU, {os.cpu_count() or 1} CPUs)")
@@ -251,10 +257,11 @@ def run_campaign(family: str, episodes: Sequence[int], methods: Sequence[str], s
     keys = [(i, m) for i in episodes for m in methods]
     response_state = profile_response_state(vehicle)
     store = (ResultsFile(results_path, campaign_header(family, seed, c_min, duration_s, noise_correlation_s, vehicle,
-                                                       response_state, profile_autopilot(vehicle)), resume=resume)
+                                                       response_state, profile_autopilot(vehicle), solver), resume=resume)
              if results_path is not None else None)
     in_memory: dict[tuple[int, str], EpisodeResult] = {}
-    todo = [EpisodeTask(family, seed, i, m, c_min, duration_s, noise_correlation_s, vehicle) for i, m in keys if store is None or (i, m) not in store]
+    todo = [EpisodeTask(family, seed, i, m, c_min, duration_s, noise_correlation_s, vehicle, solver)
+            for i, m in keys if store is None or (i, m) not in store]
     workers = max(1, min(workers, len(todo)))  # a pool never starts more processes than there are runs
     mode = "auto" if progress is None or progress is True else ("off" if progress is False else progress)
     bar = Progress(f"campaign {family}", len(keys), len(keys) - len(todo), mode=mode)

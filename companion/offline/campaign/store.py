@@ -35,12 +35,14 @@ MAX_LINE_BYTES = 16 * 1024 * 1024
 
 def campaign_header(family: str, seed: int, c_min: float, duration_s: float,
                     noise_correlation_s: float = 0.0, vehicle: str = "lag",
-                    response_state: str | None = None, autopilot: str | None = None) -> dict[str, Any]:
+                    response_state: str | None = None, autopilot: str | None = None,
+                    solver: str = "osqp") -> dict[str, Any]:
     """The header line: what every row of the file depends on (``vehicle`` only when it is
     not the default lag profile; ``response_state``, where the plans start the response
     model's internal state, only when given: a file written before it was recorded then
     refuses to resume under it; ``autopilot``, the autopilot mavsim imitates, only when it is
-    not mavsim's default PX4: a file flown against PX4's personality refuses to resume under it)."""
+    not mavsim's default PX4: a file flown against PX4's personality refuses to resume under it;
+    ``solver``, the planner's QP backend, only when it is not OSQP)."""
     header = {"format": FORMAT, "version": VERSION, "family": family, "seed": int(seed),
               "c_min": float(c_min), "duration_s": float(duration_s),
               "noise_correlation_s": float(noise_correlation_s)}
@@ -50,6 +52,8 @@ def campaign_header(family: str, seed: int, c_min: float, duration_s: float,
         header["response_state"] = response_state
     if autopilot is not None:
         header["autopilot"] = autopilot
+    if solver != "osqp":
+        header["solver"] = solver
     return header
 
 
