@@ -614,15 +614,13 @@ def _report(path: Path, scenario_path: Path, records: list, parsed: _Parsed, tim
     return result
 
 
-#: The companion's mission-protocol answers, sent on receipt of the vehicle's messages (the upload's
-#: items, the download's item requests and ack). A log files them under a tick (an unmarked one stamps
-#: them like the tick's packets); the replay sends them on receipt too, so they are not compared.
-_MISSION_ANSWERS = CLIENT_ANSWERS
-
-
 def _compared_types(sent: list) -> list[str]:
-    """The message types of a tick compared with the recording's: all but the mission protocol's answers."""
-    return [m.get_type() for m in sent if m.get_type() not in _MISSION_ANSWERS]
+    """The message types of a tick compared with the recording's: all but the mission protocol's answers.
+
+    Those (``CLIENT_ANSWERS``: the upload's items, the download's item requests and ack) are sent on
+    receipt of the vehicle's messages. A log files them under a tick (an unmarked one stamps them like
+    the tick's packets); the replay sends them on receipt too, so they are not compared."""
+    return [m.get_type() for m in sent if m.get_type() not in CLIENT_ANSWERS]
 
 
 def _is_clock_answer(msg) -> bool:

@@ -30,7 +30,6 @@ import argparse
 import json
 import logging
 import os
-import signal
 import subprocess
 import sys
 import threading
@@ -45,6 +44,7 @@ from mavsim.traffic import PlayerLinks, TrafficPlayer
 from tests.px4.flight import (COMPANION_TIMEOUT_S, HOLD, HOLD_WATCH_S, OBSTACLE_PORT, TAKEOFF_ALT_M,
                               companion_argv, fly_once, judge_replay, judge_safety)
 from tests.px4.sitl import REPO, Sitl, raise_priority
+from tests.support.processes import kill_process_group
 from tests.support.runs import fly_runs
 
 logger = logging.getLogger(__name__)
@@ -184,17 +184,6 @@ def _fly_argv(tlog: Path, *extra: str) -> list[str]:
                           "--json", *extra)
 
 
-def _kill_group(proc: subprocess.Popen) -> None:
-    try:
-        os.killpg(proc.pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
-    try:
-        proc.communicate(timeout=10)
-    except subprocess.TimeoutExpired:
-        pass
-
-
 def fly_killed_and_restarted(work: Path, seed: int = 0, after_s: float = FAULT_AFTER_S,
                              reengage: bool = False) -> dict:
     """The companion SIGKILLed ``after_s`` s into OFFBOARD and started again; the figures."""
@@ -226,7 +215,7 @@ def fly_killed_and_restarted(work: Path, seed: int = 0, after_s: float = FAULT_A
                 if t_kill is None:
                     r["why"] = "never in OFFBOARD"
                     return r
-                _kill_group(first)
+                kill_process_group(first)
                 t0 = player.engaged_t_s
                 r["killed_s"] = round(player.now_s() - t0, 2)
                 deadline = time.monotonic() + FAILSAFE_WAIT_S
@@ -245,7 +234,7 @@ def fly_killed_and_restarted(work: Path, seed: int = 0, after_s: float = FAULT_A
             finally:
                 for proc in (first, second):
                     if proc is not None and proc.poll() is None:
-                        _kill_group(proc)
+                        kill_process_group(proc)
                 stop.set()
                 thread.join(timeout=5.0)
     finally:

@@ -12,8 +12,6 @@ Every wait is bounded.
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import threading
@@ -27,6 +25,7 @@ from mavsim.core import Simulator
 from mavsim.scenario import load_scenario
 from mavsim.udp import LinkAddress, UdpServer
 from tests.support.ports import free_udp_port
+from tests.support.processes import kill_process_group
 
 pytestmark = pytest.mark.realtime   # in .ci/run: 20 of 20 in make flake-check (docs/TESTING.md)
 
@@ -54,15 +53,6 @@ def _wait(predicate, timeout_s: float = WAIT_S) -> bool:
     return False
 
 
-def _kill_group(proc: subprocess.Popen) -> None:
-    """SIGKILL the process group of ``proc`` (a fly this test started, with its planning process)."""
-    try:
-        os.killpg(proc.pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
-    proc.communicate(timeout=10)
-
-
 def _restart(tmp_path: Path, *second_args: str):
     port, obstacle_port = free_udp_port(), free_udp_port()
     sim = Simulator(load_scenario(SCENARIO), seed=0)
@@ -82,7 +72,7 @@ def _restart(tmp_path: Path, *second_args: str):
             return bool(engaged_at) and sim.time_s - engaged_at[0] >= IN_OFFBOARD_S
 
         assert _wait(flown_into_encounter), "the first fly never flew 7 s in OFFBOARD"
-        _kill_group(first)
+        kill_process_group(first)
         marks["killed_s"] = sim.time_s
         assert _wait(lambda: sim.commander.mode != "OFFBOARD", 5.0)   # PX4's failsafe
         marks["failsafe_s"] = sim.time_s
@@ -93,7 +83,7 @@ def _restart(tmp_path: Path, *second_args: str):
     finally:
         for proc in (first, second):
             if proc is not None and proc.poll() is None:
-                _kill_group(proc)
+                kill_process_group(proc)
         server.stop()
         serve.join(timeout=5)
         server.close()
