@@ -130,6 +130,17 @@ class Simulator:
         self._gps_outages = [(round(t * 1e6), round((t + d) * 1e6), cfg.gps_outage_drift_mps * gps_rng.standard_normal(3))
                              for t, d in cfg.gps_outages]
         self._gps_sd_growth_mps = cfg.gps_outage_sd_growth_mps
+        # a degraded GPS: (start us, end us, sd m), a unit horizontal Gauss-Markov error scaled by
+        # sd, its draws from a stream of their own as well
+        self._gps_degradations = [(round(t * 1e6), round((t + d) * 1e6), sd) for t, d, sd in cfg.gps_degradations]
+        self._gps_noise = GaussMarkovError(np.diag([1.0, 1.0, 0.0]), cfg.gps_degradation_correlation_s)
+        self._gps_noise_rng = np.random.default_rng([self.seed, 0x4E4F4953])
+        longest = max((d for _, d in cfg.gps_outages), default=0.0)
+        limit = self.personality.gps_outage_max_s
+        if limit is not None and longest >= limit:
+            raise SimulationError(f"[sim] gps_outages: an outage of {longest:g} s; the {self.personality.name} "
+                                  f"personality models outages shorter than {limit:g} s (its failsafe on a lost "
+                                  "position is not modelled)")
         self.vparams = VehicleParams(cfg.velocity_time_constant_s, cfg.accel_max_mps2,
                                      response=velocity_response(cfg.vehicle))
         self.vehicle = initial_state(scenario.start_ned_m, cfg.start_yaw_rad)
@@ -218,9 +229,21 @@ class Simulator:
             tm.reset_counter = (len(done) + outages_ended) % 256   # each outage ends in a reset to the GPS
             tm.gps_fix = outage_s is None
             tm.extra_horizontal_var_m2 = 0.0 if outage_s is None else (self._gps_sd_growth_mps * outage_s) ** 2
+            sd = self._gps_degradation_sd(self.now_us)
+            if sd:
+                position = position + sd * self._gps_noise.sample(self.now_us, self._gps_noise_rng.standard_normal(3))
+                tm.extra_horizontal_var_m2 += sd * sd
+            tm.gps_degraded_sd_m = sd
             self._est = (position, velocity)
             self._est_t = self.now_us
         return self._est
+
+    def _gps_degradation_sd(self, now_us: int) -> float:
+        """The extra horizontal standard deviation of a degraded GPS now (m; 0 when it is not)."""
+        for start_us, end_us, sd in self._gps_degradations:
+            if start_us <= now_us < end_us:
+                return sd
+        return 0.0
 
     def _gps_outage(self, now_us: int) -> tuple[np.ndarray, float | None, int]:
         """The estimate's dead-reckoning drift now (NED m), how long the outage in progress has
@@ -368,6 +391,8 @@ class Simulator:
         while self.now_us < t_us:
             h = min(self.step_us, t_us - self.now_us)
             dt = h * 1e-6
+            if self._gps_outages:
+                self.commander.position_aiding(self._gps_outage(self.now_us)[1], self.now_us * 1e-6, self.vehicle)
             cmd = self.commander.update(self.now_us * 1e-6, dt, self.vehicle)
             if self._velocity_bias is not None:    # the loop holds the biased estimate on the setpoint
                 cmd = dataclasses.replace(cmd, velocity_ned_mps=cmd.velocity_ned_mps

@@ -51,19 +51,31 @@ estimator_resets : list of [t_s, dn, de, dd], default none
     and regained). The truth and the vehicle's motion do not jump.
 gps_outages : list of [t_s, duration_s], default none
     GPS outages (at most 100, not overlapping): from simulated time ``t_s`` (s since boot) for
-    ``duration_s`` (0 < d < 5 s) the estimator dead-reckons, as PX4's EKF2 does without GPS:
+    ``duration_s`` (0 < d <= 600 s) the estimator dead-reckons, as PX4's EKF2 does without GPS:
     the reported position drifts at a velocity drawn per outage (``gps_outage_drift_mps`` per
     axis, 1-sigma; seeded), the horizontal variance reported in ODOMETRY grows by
     ``(gps_outage_sd_growth_mps * tau)**2`` at ``tau`` s into the outage, and GPS_RAW_INT shows
     no fix. When it ends the drift is gone at once and ODOMETRY's ``reset_counter`` counts one
-    more (PX4 resets its position to the GPS). Outages of 5 s or more are refused: PX4's own
-    limit on dead reckoning (``EKF2_NOAID_TOUT``, 5 s) then ends in its failsafe, not modelled.
+    more (PX4 resets its position to the GPS). PX4's own limit on dead reckoning
+    (``EKF2_NOAID_TOUT``, 5 s) ends a longer outage in its failsafe: the position invalid, the
+    vehicle in ALTCTL until the GPS is back, then returning (AUTO.RTL). The ArduPilot
+    personality refuses outages of 5 s or more (its EKF failsafe is not modelled).
     Measured on PX4 SITL (docs/FAULTS.md): 1.6 to 3.6 m of drift and a reported deviation
     from 0.14-0.17 m to 1.09-1.20 m over 5 s.
 gps_outage_drift_mps : float, default 0.4
     The 1-sigma drift velocity of the estimate in an outage, per axis (m/s, 0 to 5).
 gps_outage_sd_growth_mps : float, default 0.2
     How fast the reported horizontal standard deviation grows in an outage (m/s, 0 to 5).
+gps_degradations : list of [t_s, duration_s, sd_m], default none
+    Spells of a degraded GPS (at most 100, not overlapping; 0 < duration_s <= 600, 0 < sd_m <= 20):
+    from ``t_s`` for ``duration_s`` the estimate the autopilot reports carries an extra horizontal
+    error of standard deviation ``sd_m`` per axis (north, east; a Gauss-Markov error of
+    correlation time ``gps_degradation_correlation_s``, seeded from its own stream), and the
+    horizontal variance ODOMETRY reports grows by ``sd_m**2`` (an honest estimator: its
+    covariance says what it knows); GPS_RAW_INT's ``h_acc`` grows with it. A noisy GPS that the
+    estimator still fuses, unlike an outage: no reset, no failsafe.
+gps_degradation_correlation_s : float, default 2.0
+    Correlation time of a degraded GPS's error in the estimate (s, 0 to 60; 0: white).
 start_airborne : bool, default ``start_ned_m[2] < 0``
     Spawn in the air, hovering. With ``false`` the start point is put on the ground.
 start_armed : bool, default ``start_airborne``
@@ -188,6 +200,8 @@ class SimConfig:
     gps_outages: tuple[tuple[float, float], ...] = ()
     gps_outage_drift_mps: float = 0.4
     gps_outage_sd_growth_mps: float = 0.2
+    gps_degradations: tuple[tuple[float, float, float], ...] = ()
+    gps_degradation_correlation_s: float = 2.0
     start_airborne: bool = True
     start_armed: bool = True
     start_mode: str | None = None
@@ -280,7 +294,7 @@ MAX_MAP_ITEMS = 256
 SIM_KEYS = {
     "vehicle", "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2", "position_noise_correlation_s",
     "velocity_bias_mps", "velocity_bias_period_s", "estimator_resets",
-    "gps_outages", "gps_outage_drift_mps", "gps_outage_sd_growth_mps",
+    "gps_outages", "gps_outage_drift_mps", "gps_outage_sd_growth_mps", "gps_degradations", "gps_degradation_correlation_s",
     "velocity_noise_cov_m2ps2", "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
     "home_lat_deg", "home_lon_deg", "home_alt_m", "geoid_separation_m", "arming_delay_s", "offboard_reject_ack",
     "params", "stream_rates_hz",
@@ -429,21 +443,37 @@ def _estimator_resets(s: _Section) -> tuple[tuple[float, tuple[float, float, flo
     return tuple((float(r[0]), (float(r[1]), float(r[2]), float(r[3]))) for r in a)
 
 
-#: Longest GPS outage modelled (s): PX4's EKF2_NOAID_TOUT; longer ones end in PX4's failsafe.
-GPS_OUTAGE_MAX_S = 5.0
+#: Longest GPS outage a scenario may hold (s). PX4 fails safe after EKF2_NOAID_TOUT (5 s by
+#: default) of it; a personality whose failsafe is not modelled refuses outages from its
+#: ``gps_outage_max_s`` on.
+GPS_OUTAGE_MAX_S = 600.0
 
 
 def _gps_outages(s: _Section) -> tuple[tuple[float, float], ...]:
-    """``gps_outages``: rows ``[t_s, duration_s]``, t_s >= 0, 0 < duration_s < 5, not overlapping; sorted."""
+    """``gps_outages``: rows ``[t_s, duration_s]``, t_s >= 0, 0 < duration_s <= 600, not overlapping; sorted."""
     a = _timed_rows(s, "gps_outages", "t_s, duration_s")
     if a is None:
         return ()
-    if np.any(a[:, 0] < 0.0) or np.any(a[:, 1] <= 0.0) or np.any(a[:, 1] >= GPS_OUTAGE_MAX_S):
-        raise s.err("gps_outages", f"each t_s must be >= 0 and each duration_s in (0, {GPS_OUTAGE_MAX_S:g}) s "
-                    "(PX4's EKF2_NOAID_TOUT: longer outages end in its failsafe, not modelled)")
+    if np.any(a[:, 0] < 0.0) or np.any(a[:, 1] <= 0.0) or np.any(a[:, 1] > GPS_OUTAGE_MAX_S):
+        raise s.err("gps_outages", f"each t_s must be >= 0 and each duration_s in (0, {GPS_OUTAGE_MAX_S:g}] s")
     if np.any(a[1:, 0] < a[:-1, 0] + a[:-1, 1]):
         raise s.err("gps_outages", "outages must not overlap")
     return tuple((float(r[0]), float(r[1])) for r in a)
+
+
+def _gps_degradations(s: _Section) -> tuple[tuple[float, float, float], ...]:
+    """``gps_degradations``: rows ``[t_s, duration_s, sd_m]``, t_s >= 0, 0 < duration_s <= 600,
+    0 < sd_m <= 20, not overlapping; sorted."""
+    a = _timed_rows(s, "gps_degradations", "t_s, duration_s, sd_m")
+    if a is None:
+        return ()
+    if np.any(a[:, 0] < 0.0) or np.any(a[:, 1] <= 0.0) or np.any(a[:, 1] > GPS_OUTAGE_MAX_S) \
+            or np.any(a[:, 2] <= 0.0) or np.any(a[:, 2] > 20.0):
+        raise s.err("gps_degradations", f"each t_s must be >= 0, each duration_s in (0, {GPS_OUTAGE_MAX_S:g}] s "
+                    "and each sd_m in (0, 20] m")
+    if np.any(a[1:, 0] < a[:-1, 0] + a[:-1, 1]):
+        raise s.err("gps_degradations", "spells must not overlap")
+    return tuple((float(r[0]), float(r[1]), float(r[2])) for r in a)
 
 
 def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
@@ -486,6 +516,8 @@ def _sim_config(src: str, raw: Any, start_z: float) -> SimConfig:
         gps_outages=_gps_outages(s),
         gps_outage_drift_mps=s.number("gps_outage_drift_mps", 0.4, lo=0.0, hi=5.0),
         gps_outage_sd_growth_mps=s.number("gps_outage_sd_growth_mps", 0.2, lo=0.0, hi=5.0),
+        gps_degradations=_gps_degradations(s),
+        gps_degradation_correlation_s=s.number("gps_degradation_correlation_s", 2.0, lo=0.0, hi=60.0),
         start_airborne=airborne,
         start_armed=s.boolean("start_armed", airborne),
         start_mode=mode,

@@ -104,6 +104,8 @@ class TelemetryBuilder:
         self.gps_fix = True
         #: variance added to ODOMETRY's reported x and y (m^2): the growth of a dead-reckoned estimate
         self.extra_horizontal_var_m2 = 0.0
+        #: a degraded GPS's extra horizontal standard deviation (m; ``[sim] gps_degradations``), in GPS_RAW_INT's h_acc
+        self.gps_degraded_sd_m = 0.0
 
     def _pose_cov_now(self) -> list[float]:
         """ODOMETRY's pose covariance: the noise's, plus a dead-reckoning outage's growth in x and y."""
@@ -156,7 +158,8 @@ class TelemetryBuilder:
                 return mavlink2.MAVLink_gps_raw_int_message(now_us, 1, 0, 0, 0, 65535, 65535, 65535, 65535, 0)
             return mavlink2.MAVLink_gps_raw_int_message(
                 now_us, 3, lat, lon, alt, 70, 100, round(speed * 100), cog, 12,
-                alt + round(self.geoid_separation_m * 1000), 700, 1000, 200, 0, 0)
+                alt + round(self.geoid_separation_m * 1000), round(1000 * math.hypot(0.7, self.gps_degraded_sd_m)),
+                1000, 200, 0, 0)
         if msg_id == 1:
             health = _SENSORS | _PREARM
             return mavlink2.MAVLink_sys_status_message(health, health, health, 150, 16200, 500, 90,

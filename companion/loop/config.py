@@ -55,7 +55,8 @@ SIMULATOR_KEYS: dict[str, frozenset[str]] = {
     "sim": frozenset({
         "vehicle", "velocity_time_constant_s", "accel_max_mps2", "physics_step_s", "position_noise_cov_m2",
         "position_noise_correlation_s", "velocity_noise_cov_m2ps2", "velocity_bias_mps", "velocity_bias_period_s",
-        "estimator_resets", "gps_outages", "gps_outage_drift_mps", "gps_outage_sd_growth_mps",
+        "estimator_resets", "gps_outages", "gps_outage_drift_mps", "gps_outage_sd_growth_mps", "gps_degradations",
+        "gps_degradation_correlation_s",
         "start_airborne", "start_armed", "start_mode", "start_yaw_rad",
         "home_lat_deg", "home_lon_deg", "home_alt_m", "geoid_separation_m", "arming_delay_s", "offboard_reject_ack",
         "params", "stream_rates_hz",

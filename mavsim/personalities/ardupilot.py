@@ -377,6 +377,10 @@ class Commander:
                 v[:2] *= vmax / h
         return v
 
+    def position_aiding(self, unaided_s: float | None, now_s: float, vehicle: VehicleState) -> None:
+        """Nothing: ArduPilot's EKF failsafe is not modelled (its personality refuses outages of
+        ``gps_outage_max_s`` or more)."""
+
     def update(self, now_s: float, dt: float, vehicle: VehicleState) -> VehicleCommand:
         """Readiness, auto-disarm, then this step's velocity command."""
         if not self.origin_set and now_s >= self.origin_s:
@@ -456,6 +460,7 @@ class ArduPilotPersonality:
     param_ints_bytewise = False
     #: MAV_CMD_NAV_TAKEOFF param7 is metres above home.
     takeoff_alt_amsl = False
+    gps_outage_max_s = 5.0          # its EKF failsafe on a lost position is not modelled
 
     def default_start_mode(self, airborne: bool) -> str:
         """LOITER when airborne, STABILIZE (as ArduCopter boots) on the ground."""

@@ -123,6 +123,11 @@ class Commander(Protocol):
     def accept_setpoint(self, sp: OffboardSetpoint, now_s: float) -> None:
         """A validated offboard setpoint arrived (proof of life; flown in the offboard mode)."""
 
+    def position_aiding(self, unaided_s: float | None, now_s: float, vehicle: VehicleState) -> None:
+        """The estimator has dead-reckoned (no GPS) for ``unaided_s`` seconds, None when aided;
+        told before each :meth:`update` while the scenario has GPS outages. An autopilot that
+        stops trusting a dead-reckoned position fails safe here."""
+
     def update(self, now_s: float, dt: float, vehicle: VehicleState) -> VehicleCommand:
         """Failsafe and auto-disarm checks, then the velocity command for the next ``dt`` seconds."""
 
@@ -152,6 +157,9 @@ class Personality(Protocol):
     param_ints_bytewise: bool
     #: MAV_CMD_NAV_TAKEOFF's param7 is an altitude AMSL (True) or metres above home (False).
     takeoff_alt_amsl: bool
+    #: Longest GPS outage whose end it models (s; None: any); longer ones are refused, for an
+    #: autopilot whose failsafe on a lost position is not modelled.
+    gps_outage_max_s: float | None
 
     def default_arming_delay_s(self, airborne: bool) -> float:
         """Arming is refused this long after boot when ``[sim] arming_delay_s`` is unset (s)."""

@@ -20,6 +20,12 @@ Imitated (see ``docs/PX4_FACTS.md``, sections 2, 3, 5 and 6):
   COM_OBL_RC_ACT fallback (0-2 Position hold, 3 Return, 4 Land, 5 Hold, 6-7 Land) and
   never re-enters OFFBOARD by itself. No failsafe while disarmed.
 - Takeoff climbs at MPC_TKO_SPEED to the target, then AUTO.LOITER.
+- Dead reckoning (no GPS) for EKF2_NOAID_TOUT: the local position is invalid. Armed and
+  airborne, PX4 says "Failsafe: blind land" and "Failsafe activated" and leaves any mode that
+  needs a position for ALTCTL, descending at MPC_LAND_SPEED without horizontal position control
+  (mavsim commands zero horizontal velocity); modes that need a position are refused until it
+  is valid again, and then the vehicle returns (AUTO.RTL), as measured on PX4 SITL
+  (docs/PX4_FACTS.md).
 
 Deviations: POSCTL behaves as position hold with centred sticks (real PX4 without RC
 refuses it); RTL flies home at the current altitude (no climb to RTL_RETURN_ALT), then
@@ -46,6 +52,7 @@ __all__ = ["PX4", "Px4Personality", "Commander", "MODES", "START_MODES", "PARAMS
 
 #: PX4 mode name -> (main mode, sub mode).
 MODES: dict[str, tuple[int, int]] = {
+    "ALTCTL": (2, 0),
     "POSCTL": (3, 0),
     "AUTO.TAKEOFF": (4, 2),
     "AUTO.LOITER": (4, 3),
@@ -57,7 +64,7 @@ _MODE_BY_NUMBER = {v: k for k, v in MODES.items()}
 #: The modes ``[sim] start_mode`` accepts, in the order its error message lists them.
 START_MODES = ("POSCTL", "AUTO.LOITER", "AUTO.TAKEOFF", "AUTO.LAND", "AUTO.RTL", "OFFBOARD")
 #: Names PX4 uses in its messages.
-DISPLAY = {"POSCTL": "Position", "AUTO.TAKEOFF": "Takeoff", "AUTO.LOITER": "Hold", "AUTO.RTL": "Return",
+DISPLAY = {"ALTCTL": "Altitude", "POSCTL": "Position", "AUTO.TAKEOFF": "Takeoff", "AUTO.LOITER": "Hold", "AUTO.RTL": "Return",
            "AUTO.LAND": "Land", "OFFBOARD": "Offboard"}
 _MAIN_DISPLAY = {1: "Manual", 2: "Altitude", 3: "Position", 4: "Auto", 5: "Acro", 6: "Offboard",
                  7: "Stabilized", 8: "Rattitude"}
@@ -92,6 +99,7 @@ PARAMS: ParamTable = {
     "MPC_LAND_SPEED": (0.7, PARAM_TYPE_REAL32, 0.6, 2.0),
     "MAV_SYS_ID": (1, PARAM_TYPE_INT32, 1, 250),
     "NAV_DLL_ACT": (0, PARAM_TYPE_INT32, 0, 6),
+    "EKF2_NOAID_TOUT": (5000000, PARAM_TYPE_INT32, 500000, 10000000),   # us of dead reckoning allowed
 }
 
 #: Stream name -> default rate (Hz): PX4's on the offboard link.
@@ -165,6 +173,8 @@ class Commander:
         self.mode = mode
         self.armed = armed
         self.failsafe = False
+        #: the estimator has a local position (False after EKF2_NOAID_TOUT without aiding)
+        self.position_valid = True
         self.arming_delay_s = arming_delay_s
         self.offboard_reject_ack = offboard_reject_ack
         self.setpoint: OffboardSetpoint | None = None
@@ -193,7 +203,7 @@ class Commander:
     @property
     def base_mode(self) -> int:
         main, _ = MODES[self.mode]
-        flags = {3: 64 | 16, 4: 4 | 8 | 16, 6: 16}[main]
+        flags = {2: 64 | 16, 3: 64 | 16, 4: 4 | 8 | 16, 6: 16}[main]
         return 1 | flags | (128 if self.armed else 0)
 
     @property
@@ -252,6 +262,9 @@ class Commander:
             # Manual-input modes (no RC here) and missions (none loaded) are not available.
             self._say(SEV_CRITICAL, f"Switching to {_display(main, sub)} is currently not available")
             return mavlink2.MAV_RESULT_ACCEPTED
+        if not self.position_valid and name != "ALTCTL":
+            self._say(SEV_CRITICAL, f"Switching to {DISPLAY[name]} is currently not available")
+            return self.offboard_reject_ack if name == "OFFBOARD" else mavlink2.MAV_RESULT_ACCEPTED
         if name == "OFFBOARD" and self.armed and not self.offboard_signal(now_s):
             self._say(SEV_CRITICAL, "Switching to Offboard is currently not available")
             return self.offboard_reject_ack
@@ -325,6 +338,23 @@ class Commander:
         self.setpoint = sp
         self.last_setpoint_s = now_s
 
+    def position_aiding(self, unaided_s: float | None, now_s: float, vehicle: VehicleState) -> None:
+        """The estimator has dead-reckoned for ``unaided_s`` seconds (None: it is aided): past
+        EKF2_NOAID_TOUT the local position is invalid and an armed vehicle in a mode that needs
+        it fails safe to ALTCTL and lands blind; once aided again, a vehicle that failed safe so
+        returns."""
+        if self.position_valid and unaided_s is not None and unaided_s * 1e6 >= self.params["EKF2_NOAID_TOUT"]:
+            self.position_valid = False
+            if self.armed and self.mode != "ALTCTL":
+                self._say(SEV_CRITICAL, "Failsafe: blind land")
+                self._say(SEV_CRITICAL, "Failsafe activated")
+                self._enter("ALTCTL", vehicle, now_s)
+                self.failsafe = True
+        elif not self.position_valid and unaided_s is None:
+            self.position_valid = True
+            if self.armed and self.failsafe and self.mode == "ALTCTL":
+                self._enter("AUTO.RTL", vehicle, now_s)
+
     # ------------------------------------------------------------------ control
     def update(self, now_s: float, dt: float, vehicle: VehicleState) -> VehicleCommand:
         """Run failsafe and auto-disarm checks, then return this step's command."""
@@ -359,6 +389,9 @@ class Commander:
             else:
                 v[:2] = POS_GAIN_PER_S * d
                 v[2] = self.params["MPC_LAND_SPEED"]
+        elif self.mode == "ALTCTL":   # no horizontal position: level; a failsafe's blind land descends
+            v = np.array([0.0, 0.0, self.params["MPC_LAND_SPEED"] if self.failsafe
+                          else POS_GAIN_PER_S * (self.hold_point[2] - p[2])])
         else:  # POSCTL, AUTO.LOITER, OFFBOARD before any setpoint: hold
             v = POS_GAIN_PER_S * (self.hold_point - p)
         return VehicleCommand(self._limit(v), yaw, yaw_rate, True)
@@ -441,6 +474,7 @@ class Px4Personality:
     response_models = {"px4": Px4Response()}
     param_ints_bytewise = True      # MAV_PARAM_TYPE_INT32 bits in the float field
     takeoff_alt_amsl = True         # NAV_TAKEOFF param7 is AMSL
+    gps_outage_max_s = None         # past EKF2_NOAID_TOUT its failsafe (Commander.position_aiding)
 
     def default_arming_delay_s(self, airborne: bool) -> float:
         """No delay unless the scenario sets one."""

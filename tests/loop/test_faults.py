@@ -220,6 +220,46 @@ def test_that_a_gps_outage_is_said_widens_the_margins_and_the_reset_after_it_is_
     assert not s["collided"] and s["goal_reached"], s
 
 
+def test_that_a_degraded_gps_is_said_and_widens_the_margins_without_a_reset():
+    """A noisy GPS, still fused, for 6 s from 6 s (``[sim] gps_degradations``, 1 m more per
+    horizontal axis, reported): the companion says the position is uncertain at once and certain
+    again when it ends, plans with the reported covariance, acts on no reset; the goal, no collision."""
+    start, length = ENCOUNTER_S - 2.0, 6.0
+    result = run_lockstep(_with_resets([], gps_degradations=[[start, length, 1.0]]), seed=0, duration_s=30.0)
+    s = result.summary()
+    events = result.companion.state.events
+    uncertain = [t for t, text in events if text.startswith("companion: position uncertain (sd 1.0")]
+    certain = [t for t, text in events if text.startswith("companion: position certain again")]
+    assert len(uncertain) == 1 and start <= uncertain[0] <= start + 0.1, events
+    assert len(certain) == 1 and start + length <= certain[0] <= start + length + 0.1, events
+    drone_covs = [r.drone_cov[0, 0] for r in result.companion.records if start + 0.2 <= r.t_vehicle_s < start + length]
+    assert drone_covs and min(drone_covs) >= 1.0          # planned with the reported covariance
+    assert s["estimator_resets"] == 0 and s["position_uncertain_events"] == 1
+    assert not s["collided"] and s["goal_reached"], s
+
+
+def test_that_px4s_failsafe_at_the_end_of_its_dead_reckoning_is_named_and_not_fought():
+    """8 s without GPS from 6 s: 5 s in (``EKF2_NOAID_TOUT``) PX4's position is invalid and it lands
+    blind in ALTCTL, CRITICAL: the companion stops within a HEARTBEAT, never asks for OFFBOARD
+    again (PX4 would refuse it) and ends "autopilot failsafe" (exit 7); when the GPS is back PX4
+    returns on its own."""
+    start = ENCOUNTER_S - 2.0
+    side = VehicleSide([])
+    result = run_lockstep(_with_resets([], gps_outages=[[start, 8.0]]), seed=0, drop=side, duration_s=30.0)
+    left = left_offboard_t(result.truth)
+    assert left == pytest.approx(start + 5.0, abs=0.011), result.truth["mode_changes"]
+    assert _modes(result) == ["AUTO.LOITER", "OFFBOARD", "ALTCTL", "AUTO.RTL"]
+    assert result.truth["mode_changes"][-1]["t_s"] == pytest.approx(start + 8.0, abs=0.011)
+    assert side.left_offboard_seen_t - left <= 1.0 + 1e-6
+    assert side.setpoints_after(side.left_offboard_seen_t) == 0 and side.mode_requests_after(left) == 0
+    texts = _texts(result)
+    assert any(t.startswith("companion: position uncertain (sd ") for t in texts), texts
+    seq = result.companion.sequencer
+    assert seq.phase is Phase.PILOT_TOOK_OVER and seq.left_by == "failsafe" and not seq.state.streaming
+    assert RunEnd().outcome(result.companion) is Outcome.AUTOPILOT_FAILSAFE
+    assert not any(c["t_start_s"] < left for c in result.truth["collisions"])
+
+
 def test_that_a_plan_asked_before_a_reset_and_answered_after_it_is_never_flown():
     """Real time: the planning process answers a request built before the reset after it. That plan
     starts from a position of the old frame: discarded on arrival (counted), the stream brakes, and

@@ -67,8 +67,13 @@ FAULTS: tuple[FaultCase, ...] = (
     FaultCase("obstacle source dies", lambda t0: _cut(t0 - 2.0, 1e9, "obstacles", 102), ("goal reached",)),
     FaultCase("estimator reset and back", lambda t0: {"resets": [[t0, 1.5, 1.0, 0.0], [t0 + 4.0, -1.5, -1.0, 0.0]]},
               ("goal reached",)),
-    # 4 s of dead reckoning ending at t0 + 2 s, through the encounter (PX4 fails safe at 5 s, not modelled)
+    # 4 s of dead reckoning ending at t0 + 2 s, through the encounter (under PX4's 5 s EKF2_NOAID_TOUT)
     FaultCase("GPS outage 4 s", lambda t0: {"sim": {"gps_outages": [[t0 - 2.0, 4.0]]}}, ("goal reached",)),
+    # a noisy GPS still fused, 6 s from t0 - 2 s: 1 m more per horizontal axis, honestly reported
+    FaultCase("GPS degraded 1 m 6 s", lambda t0: {"sim": {"gps_degradations": [[t0 - 2.0, 6.0, 1.0]]}},
+              ("goal reached",)),
+    # 8 s from t0 - 2 s: 5 s in, PX4 declares its position invalid and fails safe to ALTCTL
+    FaultCase("GPS outage 8 s", lambda t0: {"sim": {"gps_outages": [[t0 - 2.0, 8.0]]}}, ("autopilot failsafe",)),
 )
 
 
