@@ -76,6 +76,8 @@ class InboundRouter:
             self.obstacles.reference.on_home(decoded)  # where goals relative to home are placed
         elif isinstance(decoded, messages.EstimatorStatus):
             self.sequencer.on_estimator_status(rx.t_s, decoded.flags)
+        elif isinstance(decoded, messages.LandedState):
+            self.sequencer.on_landed_state(rx.t_s, decoded.on_ground)
         return []
 
     def _timesync(self, t_rx: float, sync: messages.TimeSync) -> list[mavlink2.MAVLink_message]:

@@ -201,6 +201,19 @@ class EstimatorStatus:
 
 
 @dataclass(frozen=True)
+class LandedState:
+    """EXTENDED_SYS_STATE: the sender's ``landed_state`` (MAV_LANDED_STATE: 0 unknown, 1 on the
+    ground, 2 in the air, 3 taking off, 4 landing)."""
+
+    key: Key
+    landed_state: int
+
+    @property
+    def on_ground(self) -> bool:
+        return self.landed_state == mavlink2.MAV_LANDED_STATE_ON_GROUND
+
+
+@dataclass(frozen=True)
 class TimeSync:
     """TIMESYNC: a request when ``tc1_ns`` is 0 (``ts1_ns`` the sender's clock), else an answer
     (``tc1_ns`` the answerer's clock on receipt, ``ts1_ns`` the request's echoed). Nanoseconds."""
@@ -223,8 +236,8 @@ class Rejected:
     reason: str
 
 
-Decoded = Union[VehicleHeartbeat, PoseObservation, CommandAck, StatusText, HomePosition, EstimatorStatus, TimeSync,
-                Rejected]
+Decoded = Union[VehicleHeartbeat, PoseObservation, CommandAck, StatusText, HomePosition, EstimatorStatus, LandedState,
+                TimeSync, Rejected]
 
 
 # --------------------------------------------------------------------------- decoding
@@ -306,6 +319,11 @@ def decode_home_position(msg: mavlink2.MAVLink_home_position_message) -> HomePos
 def decode_ekf_status_report(msg) -> EstimatorStatus:
     """EKF_STATUS_REPORT (193, ArduPilot's dialect) to :class:`EstimatorStatus`."""
     return EstimatorStatus(key=source_key(msg), flags=int(msg.flags))
+
+
+def decode_extended_sys_state(msg) -> LandedState:
+    """EXTENDED_SYS_STATE (245) to :class:`LandedState`."""
+    return LandedState(key=source_key(msg), landed_state=int(msg.landed_state))
 
 
 def covariance_from_upper_triangle(values, *, what: str) -> np.ndarray | None | str:
@@ -456,6 +474,7 @@ _DECODERS = {
     "STATUSTEXT": decode_statustext,
     "HOME_POSITION": decode_home_position,
     "EKF_STATUS_REPORT": decode_ekf_status_report,
+    "EXTENDED_SYS_STATE": decode_extended_sys_state,
     "TIMESYNC": decode_timesync,
 }
 

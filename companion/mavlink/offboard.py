@@ -52,7 +52,9 @@ the vehicle is still in OFFBOARD (it never left our control), in the phase that
 fits the vehicle if we had not engaged yet, and otherwise as after a pilot
 takeover. Leaving OFFBOARD while engaged re-enters PRESTREAM only with
 ``reengage``; PX4 never re-enters OFFBOARD by itself, and neither do we unless
-told to.
+told to. Even then a vehicle on the ground (EXTENDED_SYS_STATE: a failsafe's landing
+ended) is not taken back: OFFBOARD on the ground would fly it off again, which no
+operator asked for; the sequence ends in PILOT_TOOK_OVER.
 
 Usage (the control loop)::
 
@@ -329,6 +331,7 @@ class OffboardSequencer:
         self._other_kinds: set[tuple[int, int]] = set()  # autopilots of a kind not asked for (--autopilot)
         self._wanted_kind: Autopilot | None = by_choice(self.config.autopilot)
         self._ready = False  # the autopilot's estimator status says it can fly (EngagementPlan.wait_ready)
+        self._on_ground = False  # the autopilot's EXTENDED_SYS_STATE says it is on the ground
         self._height_m: float | None = None  # the vehicle's own height above home (its estimate), m
         self._climb_mps: float | None = None
         self._home_local_z_m = 0.0
@@ -449,6 +452,12 @@ class OffboardSequencer:
         if ready != self._ready:
             logger.info("autopilot %s ready to fly (estimator flags %d)", "now" if ready else "no longer", int(flags))
         self._ready = ready
+        self._advance(t_s)
+
+    def on_landed_state(self, t_s: float, on_ground: bool) -> None:
+        """The autopilot's landed state (EXTENDED_SYS_STATE): on the ground or not; a re-engagement
+        after a failsafe stops here when its landing has ended."""
+        self._on_ground = bool(on_ground)
         self._advance(t_s)
 
     def on_vehicle_position(self, t_s: float, z_ned_m: float, vz_ned_mps: float | None) -> None:
@@ -653,6 +662,13 @@ class OffboardSequencer:
         elif phase is Phase.WAIT_ARMED:
             if hb.armed:
                 self._transition(t_s, Phase.PRESTREAM, "vehicle armed; streaming setpoints")
+        elif phase in (Phase.PRESTREAM, Phase.REQUEST_OFFBOARD) and self._was_engaged and self._on_ground \
+                and not hb.offboard:
+            # re-engaging (``reengage``) a vehicle the autopilot has put down: not flown off again
+            self._pending = None
+            self._transition(t_s, Phase.PILOT_TOOK_OVER, f"vehicle on the ground in {hb.mode or 'unknown mode'}"
+                             + ("" if hb.armed else ", disarmed") + "; not re-engaging, stopped commanding",
+                             mavlink2.MAV_SEVERITY_WARNING)
         elif phase is Phase.PRESTREAM:
             if not hb.armed:
                 self._transition(t_s, self._entry_phase(hb), f"vehicle disarmed before {self._mode(ModeRole.OFFBOARD)}")

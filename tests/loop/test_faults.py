@@ -260,6 +260,21 @@ def test_that_px4s_failsafe_at_the_end_of_its_dead_reckoning_is_named_and_not_fo
     assert not any(c["t_start_s"] < left for c in result.truth["collisions"])
 
 
+def test_that_reengage_takes_the_vehicle_back_from_px4s_return_once_its_position_is_valid():
+    """The same 8 s outage with ``--reengage``: PX4 refuses OFFBOARD while its position is invalid;
+    once the GPS is back and it returns, the companion takes the vehicle back and flies to the goal."""
+    start = ENCOUNTER_S - 2.0
+    result = run_lockstep(_with_resets([], gps_outages=[[start, 8.0]]), seed=0, duration_s=40.0,
+                          offboard=OffboardConfig(reengage=True))
+    changes = [(round(m["t_s"], 2), m["mode"]) for m in result.truth["mode_changes"]]
+    assert [m for _, m in changes] == ["AUTO.LOITER", "OFFBOARD", "ALTCTL", "AUTO.RTL", "OFFBOARD"], changes
+    assert changes[3][0] == pytest.approx(start + 8.0, abs=0.011) and changes[4][0] > changes[3][0]
+    assert any("Switching to Offboard is currently not available" in t for t in _texts(result))
+    assert RunEnd().outcome(result.companion) is Outcome.GOAL_REACHED
+    s = result.summary()
+    assert not s["collided"] and s["goal_reached"], s
+
+
 def test_that_a_plan_asked_before_a_reset_and_answered_after_it_is_never_flown():
     """Real time: the planning process answers a request built before the reset after it. That plan
     starts from a position of the old frame: discarded on arrival (counted), the stream brakes, and

@@ -1,6 +1,5 @@
 """OffboardSequencer driven by scripted heartbeats, ACKs and STATUSTEXT, as PX4 behaves."""
 
-import math
 
 import pytest
 
@@ -147,6 +146,25 @@ def test_that_reengage_requests_offboard_again_after_the_vehicle_falls_back_to_h
     assert state.phase is Phase.PRESTREAM and state.streaming
     s.run(2.0, lambda s, m: setattr(s, "mode", px4.OFFBOARD))
     assert s.seq.phase is Phase.ENGAGED and len(s.sent) == 1
+
+
+def test_that_reengage_never_takes_back_a_vehicle_the_autopilot_has_put_down():
+    """A failsafe's landing has ended (EXTENDED_SYS_STATE on the ground): OFFBOARD now would fly the
+    vehicle off again, so re-engaging stops there, and no request goes out after it."""
+    s = Script(OffboardConfig(reengage=True), mode=px4.OFFBOARD)
+    s.run(0.1)
+    s.mode = px4.AUTO_LOITER
+    assert s.run(1.0).phase is Phase.PRESTREAM           # the next HEARTBEAT shows it left
+    s.seq.on_landed_state(s.t, on_ground=False)           # in the air: re-engaging goes on
+    assert s.seq.phase is Phase.PRESTREAM
+    s.seq.on_landed_state(s.t, on_ground=True)
+    state = s.run(3.0)
+    assert state.phase is Phase.PILOT_TOOK_OVER and not state.streaming and s.sent == []
+    assert any("on the ground" in e.text and "not re-engaging" in e.text for e in s.seq.events), s.seq.events
+    # before any engagement (a pilot arming on the ground for the companion to take off) the state is no bar
+    s = Script(OffboardConfig(reengage=True), mode=px4.POSCTL)
+    s.seq.on_landed_state(0.0, on_ground=True)
+    assert s.run(0.5).phase is Phase.PRESTREAM
 
 
 def test_that_heartbeat_loss_stops_commanding_and_recovery_resumes_only_in_offboard():
