@@ -27,6 +27,7 @@ import numpy as np
 
 from companion.core.planner import Planner, budget, osqp_qp, piqp_qp, scp
 from tests.benchmarks import bench_planner as bp
+from tests.benchmarks.solver_clock import SolverClock
 
 ROOT = Path(__file__).resolve().parents[2]
 BACKENDS = ("osqp", "piqp")
@@ -35,29 +36,7 @@ CORRIDOR_SEEDS = (0, 1, 2)
 
 #: PIQP's iterations of every QP solved in this process's benchmark (for the work unit's note).
 PIQP_ITERATIONS: list[int] = []
-
-
-class _SolverClock:
-    """Sums the backend's own solve time (``QpSolution.solve_time_s``) of every QP while active."""
-
-    def __init__(self) -> None:
-        self.total_s = 0.0
-        self._saved = {cls: cls.solve for cls in (osqp_qp.OsqpQp, piqp_qp.PiqpQp)}
-
-    def __enter__(self) -> "_SolverClock":
-        for cls, orig in self._saved.items():
-            def solve(qp, max_iter=osqp_qp.MAX_ITER, _orig=orig):
-                sol = _orig(qp, max_iter)
-                self.total_s += sol.solve_time_s
-                if isinstance(qp, piqp_qp.PiqpQp):
-                    PIQP_ITERATIONS.append(sol.iterations)
-                return sol
-            cls.solve = solve
-        return self
-
-    def __exit__(self, *exc) -> None:
-        for cls, orig in self._saved.items():
-            cls.solve = orig
+_CLASSES = (osqp_qp.OsqpQp, piqp_qp.PiqpQp)
 
 
 def _scene(solver: str, index: int) -> tuple[list[float], list[float], list]:
@@ -69,10 +48,11 @@ def _scene(solver: str, index: int) -> tuple[list[float], list[float], list]:
     times, own, plans, previous = [], [], [], None
     for k in range(bp.REPLANS):
         req = bp.request(k * bp.TAU, position, velocity, obstacles)
-        with _SolverClock() as clock:
+        with SolverClock(_CLASSES) as clock:
             t0 = time.perf_counter()
             plan = planner.solve(req, warm_start=previous)
             dt = time.perf_counter() - t0
+        PIQP_ITERATIONS.extend(clock.iterations[piqp_qp.PiqpQp])
         if previous is not None:
             times.append(dt)
             own.append(clock.total_s)
@@ -97,8 +77,9 @@ def _corridor(solver: str, seed: int) -> tuple[list[float], list, dict]:
 
     scp.Planner.solve = timed
     try:
-        with _SolverClock():
+        with SolverClock(_CLASSES) as clock:
             result = run_lockstep(ROOT / "configs" / "corridor.toml", seed=seed, solver=solver)
+        PIQP_ITERATIONS.extend(clock.iterations[piqp_qp.PiqpQp])
     finally:
         scp.Planner.solve = solve
     return times, plans, result.summary()

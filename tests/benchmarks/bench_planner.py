@@ -29,34 +29,8 @@ from companion.core import overlap
 from companion.core.planner import Planner, PlannerConfig, PlanRequest
 from companion.core.planner.formulations import BACKOFF_SIGMA
 from companion.core.planner.osqp_qp import OsqpQp
+from tests.benchmarks.solver_clock import SolverClock
 
-
-class _OsqpClock:
-    """Sums OSQP's own solve time (``QpSolution.solve_time_s``) of every QP solved while active.
-
-    ``update_s`` sums OSQP's own update time before each of those solves (new data and the
-    refactorisation of its KKT matrix, ``QpSolution.update_time_s``).
-    """
-
-    def __init__(self) -> None:
-        self.total_s = 0.0
-        self.update_s = 0.0
-        self._orig = OsqpQp.solve
-
-    def __enter__(self) -> "_OsqpClock":
-        clock, orig = self, self._orig
-
-        def solve(qp, max_iter=10000):
-            sol = orig(qp, max_iter)
-            clock.total_s += sol.solve_time_s
-            clock.update_s += sol.update_time_s
-            return sol
-
-        OsqpQp.solve = solve
-        return self
-
-    def __exit__(self, *exc) -> None:
-        OsqpQp.solve = self._orig
 
 N, TAU, REPLANS, SCENES = 40, 0.3, 60, 8
 CVXPY_EVERY = 4
@@ -117,7 +91,7 @@ def receding_horizon(formulation: str, obstacles: tuple = OBSTACLES,
     times, requests, plans, previous = [], [], [], None
     for k in range(REPLANS):
         req = request(k * TAU, position, velocity, obstacles)
-        with _OsqpClock() as clock:
+        with SolverClock((OsqpQp,)) as clock:
             t0 = time.perf_counter()
             plan = planner.solve(req, warm_start=previous)
             times.append(time.perf_counter() - t0)

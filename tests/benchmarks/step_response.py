@@ -152,7 +152,7 @@ def format_table(results: list[StepResult], vehicle: str) -> str:
     fr = lambda xs: " / ".join(f"{x:.2f}" for x in xs[:5])  # noqa: E731
     ov = lambda x: "none" if x is None else f"{x:.0f} %"  # noqa: E731
     lines = [
-        f"| step | source | t63 s | t90 s | overshoot | peak accel m/s^2 | fraction at 0.3 / 0.6 / 1 / 2 / 4 s | after 7.5 s |",
+        "| step | source | t63 s | t90 s | overshoot | peak accel m/s^2 | fraction at 0.3 / 0.6 / 1 / 2 / 4 s | after 7.5 s |",
         "|---|---|---|---|---|---|---|---|",
     ]
     diffs = fraction_differences(results)

@@ -7,12 +7,11 @@ the one line the user sees (through :func:`companion.cli.main`, in process).
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import pytest
 
 from companion.cli import main as companion_main
-from tests.commands.test_bad_input import ANTIPODAL, ROOT, assert_one_line, edited, run_companion, scenario
+from tests.commands.test_bad_input import ROOT, assert_one_line, edited, run_companion, scenario
 
 CPUS = os.cpu_count() or 1
 

@@ -151,7 +151,7 @@ def test_that_beyond_walls_checks_the_trackers_own_prediction_at_every_step():
         v = np.array([rng.uniform(-1, 1), rng.uniform(-1.5, 1.5), 0.0])
         tracker.update(k, 0.0, p, v, rng.uniform(0.01, 0.3) * np.eye(3), 0.05 * np.eye(3))
     keys = tracker.keys()
-    t_v, times = 0.4, 0.4 + 0.3 * np.arange(1, 21)
+    times = 0.4 + 0.3 * np.arange(1, 21)
     states = [tracker.state(k) for k in keys]
     radii = rng.uniform(0.3, 1.0, len(keys))
     r = confidence_radius(0.3)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.core.planner import Planner, PlanRequest
+from companion.core.planner import Planner
 from companion.errors import ConfigError, InputError
 from companion.loop.app import Companion
 from companion.loop.config import load_scenario

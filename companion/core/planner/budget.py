@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 
 from companion.core.planner.osqp_qp import QpSolution
+from companion.core.planner.qp_backend import QpBackend
 
 logger = logging.getLogger(__name__)
 
@@ -61,11 +62,10 @@ class WorkBudget:
         """Work units not yet spent."""
         return self.total - self.used
 
-    def solve(self, qp, cap: int) -> QpSolution | None:
+    def solve(self, qp: QpBackend, cap: int) -> QpSolution | None:
         """Solve ``qp`` within ``cap`` work units and what the budget has left; charge it.
 
-        ``qp`` is a backend (:class:`companion.core.planner.osqp_qp.OsqpQp` or
-        :class:`companion.core.planner.piqp_qp.PiqpQp`): its ``solve(max_iter)`` takes work
+        ``qp`` is a backend (:class:`companion.core.planner.qp_backend.QpBackend`): its ``solve(max_iter)`` takes work
         units and its ``work_per_iteration`` prices its iterations. Returns None (and marks
         the budget exhausted) when fewer than :data:`MIN_QP_ITERATIONS` units (or one of the
         backend's iterations) are left. A QP that stops unsolved at a cap the budget lowered

@@ -50,8 +50,8 @@ class _Split:
     """One PIQP solver for a set of equality and inequality rows, with the index maps from
     the full ``A`` data (CSC order of the layout) to its ``A`` and ``G`` data."""
 
-    def __init__(self, layout: QpLayout, eq: np.ndarray, ineq: np.ndarray) -> None:
-        markers = layout.a_matrix_csc(np.arange(1.0, len(layout.a_indices) + 1.0)).tocsr()
+    def __init__(self, markers, eq: np.ndarray, ineq: np.ndarray) -> None:
+        """``markers``: the layout's ``A`` (CSR) holding ``k + 1`` at the ``k``-th entry of its CSC data."""
         self.eq, self.ineq = eq, ineq
         self.a_eq = markers[eq].tocsc()
         self.g = markers[ineq].tocsc()
@@ -95,6 +95,8 @@ class PiqpQp:
         self._l = np.array(l, dtype=float)
         self._u = np.array(u, dtype=float)
         self._splits: OrderedDict[bytes, _Split] = OrderedDict()
+        # A with each entry's place in the CSC data (+1), in rows: every split's maps come from it
+        self._markers = layout.a_matrix_csc(np.arange(1.0, len(layout.a_indices) + 1.0)).tocsr()
         self.setups = 0           # new PIQP set-ups (a split seen for the first time, or evicted)
 
     def p_times(self, x: np.ndarray) -> np.ndarray:
@@ -173,7 +175,7 @@ class PiqpQp:
         key = np.packbits(eq_mask).tobytes() + np.packbits(ineq_mask).tobytes()
         split = self._splits.get(key)
         if split is None:
-            split = _Split(self.layout, np.flatnonzero(eq_mask), np.flatnonzero(ineq_mask))
+            split = _Split(self._markers, np.flatnonzero(eq_mask), np.flatnonzero(ineq_mask))
             self._splits[key] = split
             if len(self._splits) > MAX_SPLITS:
                 self._splits.popitem(last=False)

@@ -20,6 +20,7 @@ from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import LAM_EPS, Formulation, ObstacleRows, relax_out_of_range
 from companion.core.planner.osqp_qp import MAX_ITER, OsqpQp, QpSolution
 from companion.core.planner.piqp_qp import PiqpQp
+from companion.core.planner.qp_backend import QpBackend
 from companion.core.planner.qp_data import RequestData, RequestTemplate
 from companion.core.planner.qp_vectors import read_solution, write_rows
 from companion.errors import InputError
@@ -108,7 +109,7 @@ class QpWorkspace:
     def __init__(self, template: RequestTemplate) -> None:
         layout = template.layout
         self.layout, self.template = layout, template
-        self.qp: OsqpQp | PiqpQp | None = None
+        self.qp: QpBackend | None = None
         self.a_slot = np.empty_like(layout.a_data0)
         self.l = np.empty(layout.m)
         self.u = np.empty(layout.m)

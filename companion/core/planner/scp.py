@@ -42,7 +42,7 @@ from companion.core import jit, overlap
 from companion.core.planner.budget import WorkBudget
 from companion.core.planner.config import PlannerConfig
 from companion.core.planner.formulations import Formulation, ObstacleRows, make_formulation, relax_out_of_range
-from companion.core.planner.osqp_qp import OsqpQp
+from companion.core.planner.qp_backend import QpBackend
 from companion.core.planner.qp_data import RequestData, RequestTemplate
 from companion.core.planner.qp_layout import QpLayout
 from companion.core.planner.qp_step import SLACK_TOL, QpStep, QpWorkspace, solve_qp
@@ -236,8 +236,8 @@ class Planner:
         """The QP pattern of a shape ``(N, P, W)`` this planner has solved (KeyError otherwise)."""
         return self._workspaces[shape].layout
 
-    def solver(self, shape: tuple[int, int, int]) -> OsqpQp | None:
-        """The OSQP solver of a shape ``(N, P, W)`` (None before its first QP; KeyError for an unseen shape)."""
+    def solver(self, shape: tuple[int, int, int]) -> QpBackend | None:
+        """The QP backend of a shape ``(N, P, W)`` (None before its first QP; KeyError for an unseen shape)."""
         return self._workspaces[shape].qp
 
     def initial_velocities(self, request: PlanRequest, v0: np.ndarray, warm_start: Plan | None) -> np.ndarray:

@@ -275,7 +275,7 @@ class AxisResponse:
         Without an integrator (``K_i = 0``) ``xi`` stays 0 and the state is the one reached
         under the constant command that holds ``v``.
         """
-        kp, ki, k, ta = self.p_gain_per_s, self.i_gain_per_s2, self.drag_per_s, self.accel_lag_s
+        ki, k, ta = self.i_gain_per_s2, self.drag_per_s, self.accel_lag_s
         xi = k * v / ki if ki > 0.0 else 0.0
         x = [0.0, v, xi] + ([k * v] if ta > 0.0 else [])
         return np.asarray(x, dtype=float)
