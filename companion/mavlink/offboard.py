@@ -455,10 +455,9 @@ class OffboardSequencer:
         self._advance(t_s)
 
     def on_landed_state(self, t_s: float, on_ground: bool) -> None:
-        """The autopilot's landed state (EXTENDED_SYS_STATE): on the ground or not; a re-engagement
-        after a failsafe stops here when its landing has ended."""
+        """The autopilot's landed state (EXTENDED_SYS_STATE): on the ground or not. Only kept: a
+        re-engagement after a failsafe stops at the next :meth:`step` when its landing has ended."""
         self._on_ground = bool(on_ground)
-        self._advance(t_s)
 
     def on_vehicle_position(self, t_s: float, z_ned_m: float, vz_ned_mps: float | None) -> None:
         """The autopilot's own position estimate's down coordinate (m, local NED) and down velocity
