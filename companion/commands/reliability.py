@@ -5,7 +5,8 @@ typically one per ``c_min``), prints per method and ``c_min``: episodes, scored 
 obstacle) pairs, true overlaps, the overlaps the plans promised at most (the sum of their
 ``Phi(-r)``), observed over promised for the plan's promise and the
 estimates' promise, the bins whose 95 % Clopper-Pearson interval lies above their promise,
-and the mean NEES of the drone's and the relative estimates; ``--plot DIR`` draws one
+and the mean NEES of the drone's and the relative estimates with its 95 % interval
+(episodes as independent clusters: a consistent filter's interval holds 3); ``--plot DIR`` draws one
 reliability diagram per method with one curve per ``c_min`` (``reliability_METHOD.png``).
 Runs nothing: the figures come from the files alone.
 """
@@ -33,6 +34,13 @@ def _fmt(x: float | None, spec: str) -> str:
     return "-" if x is None else format(x, spec)
 
 
+def _nees(mean: float | None, ci: tuple[float, float] | None) -> str:
+    """``2.91 [2.79, 3.04]``: the pooled mean NEES and its 95 % interval (episodes as clusters)."""
+    if mean is None:
+        return "-"
+    return f"{mean:.2f}" if ci is None else f"{mean:.2f} [{ci[0]:.2f}, {ci[1]:.2f}]"
+
+
 def run(args: argparse.Namespace) -> int:
     """Summarise every file, print the table, draw the figures if asked."""
     from companion.offline.campaign import METHODS, summarise
@@ -49,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         methods = [m for m in METHODS if any(r.method == m for r in rows)]
         campaigns[c_min] = summarise(rows, methods, c_min)
     print(f"{'method':<14}{'c_min':>6}{'eps':>5}{'pairs':>8}{'hits':>6}{'promised':>10}{'plan obs/prom':>15}{'est obs/prom':>14}"
-          f"{'NEES drone':>12}{'NEES rel':>10}  bins above their promise (plan)")
+          f"{'NEES drone [95 %]':>26}{'NEES rel [95 %]':>24}  bins above their promise (plan)")
     for method in METHODS:
         for c_min, per in sorted(campaigns.items()):
             s = per.get(method)
@@ -61,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
             promised = sum(b.promised_mean * b.pairs for b in used)  # expected overlaps if every promise were exact
             print(f"{method:<14}{c_min:>6.2f}{s.episodes:>5}{sum(b.pairs for b in used):>8}{sum(b.hits for b in used):>6}{promised:>10.3g}"
                   f"{_fmt(s.plan_observed_over_promised, '15.3g')}{_fmt(s.observed_over_promised, '14.3g')}"
-                  f"{_fmt(s.drone_nees_mean, '12.2f')}{_fmt(s.relative_nees_mean, '10.2f')}  {'; '.join(over) or 'none'}")
+                  f"{_nees(s.drone_nees_mean, s.drone_nees_ci95):>26}{_nees(s.relative_nees_mean, s.relative_nees_ci95):>24}"
+                  f"  {'; '.join(over) or 'none'}")
     if args.plot:
         from companion.plots.campaign_figures import plot_reliability_by_c_min
 

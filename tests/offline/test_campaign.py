@@ -14,7 +14,7 @@ import pytest
 from scipy.stats import norm
 
 from companion.offline.campaign.reliability import PROMISE_EDGES, observed_over_promised, promise_bin
-from companion.offline.campaign.stats import reliability_bins
+from companion.offline.campaign.stats import nees_mean_ci95, reliability_bins
 from companion.offline.campaign import (
     FAMILIES,
     METHODS,
@@ -194,6 +194,34 @@ def test_that_a_reliability_bin_exceeds_its_promise_only_when_its_interval_lies_
     assert observed_over_promised(0, 0.0) is None
 
 
+def _nees_episodes(rng, episodes, steps, cov_scale, correlation):
+    """Per episode, the NEES of 3-D errors of covariance I (AR(1) in time, lag-1 ``correlation``) against ``cov_scale * I``."""
+    out = []
+    for _ in range(episodes):
+        e = np.empty((steps, 3))
+        e[0] = rng.standard_normal(3)
+        for k in range(1, steps):
+            e[k] = correlation * e[k - 1] + np.sqrt(1 - correlation ** 2) * rng.standard_normal(3)
+        out.append(list(np.sum(e * e, axis=1) / cov_scale))
+    return out
+
+
+def test_that_the_nees_interval_holds_3_for_a_consistent_filter_and_counts_episodes_not_steps():
+    rng = np.random.default_rng(7)
+    held = 0
+    for _ in range(40):   # 40 campaigns of 100 episodes of 100 steps, errors correlated over ~20 steps
+        lo, hi = nees_mean_ci95(_nees_episodes(rng, 100, 100, 1.0, 0.95))
+        held += lo <= 3.0 <= hi
+    assert held >= 34   # a 95 % interval: 38 of 40 expected, 36 here; the per-step interval (counting steps) holds 3 in 9
+    # an overconfident filter (covariances half the error's): the interval lies above 3
+    lo, hi = nees_mean_ci95(_nees_episodes(rng, 100, 100, 0.5, 0.95))
+    assert lo > 3.0 and lo < 6.0 < hi
+    # white errors over a thousand steps: close to the naive interval of 2 * 3 / n per step
+    lo, hi = nees_mean_ci95(_nees_episodes(rng, 10, 1000, 1.0, 0.0))
+    assert (hi - lo) / 2 == pytest.approx(1.96 * np.sqrt(6 / 10000), rel=0.25)
+    assert nees_mean_ci95([[3.0, 2.0]]) is None and nees_mean_ci95([[], [1.0]]) is None
+
+
 def test_that_the_bound_is_phi_of_minus_the_touch_radius():
     # docs/METHOD.md sections 1.5-1.6: c = 0.90 in 3-D -> r = 2.5003, Y = 0.0124, bound Phi(-r) = Y / 2
     assert collision_bound(0.90) == pytest.approx(0.0124 / 2, rel=2e-3)
@@ -343,6 +371,8 @@ def test_that_the_reliability_command_reads_results_files_and_draws_one_diagram_
     ratio = tiny_campaign.summary["hyperplane"].plan_observed_over_promised
     assert "hyperplane      0.50    2" in out and "hyperplane      0.90    2" in out
     assert (f"{ratio:15.3g}" if ratio is not None else "-") in out
+    s = tiny_campaign.summary["hyperplane"]
+    assert f"{s.relative_nees_mean:.2f} [{s.relative_nees_ci95[0]:.2f}, {s.relative_nees_ci95[1]:.2f}]" in out
     assert sorted(p.name for p in (tmp_path / "fig").iterdir()) == ["reliability_deterministic.png", "reliability_hyperplane.png"]
     assert main(["reliability", paths[0], paths[0]]) == 2  # one campaign per c_min
     (tmp_path / "bad.jsonl").write_text("{}\n")

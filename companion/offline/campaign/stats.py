@@ -41,6 +41,28 @@ def collision_bound(c_min: float, dim: int = 3) -> float:
     return float(norm.cdf(-float(touch_radius(c_min, dim))))
 
 
+def nees_mean_ci95(per_episode: Sequence[Sequence[float]]) -> tuple[float, float] | None:
+    """95 % interval of the pooled mean NEES (every step of every episode), episodes as independent clusters.
+
+    The steps of one episode are not independent (the errors of a filter are correlated in
+    time, the more so under correlated noise), so the interval does not count steps: it is the
+    normal interval of the ratio estimator ``sum(NEES) / steps`` with the cluster-robust
+    standard error over episodes, ``sqrt(E/(E-1) * sum_i (s_i - m n_i)^2) / sum_i n_i`` (``s_i``
+    the episode's NEES sum, ``n_i`` its steps, ``m`` the pooled mean, ``E`` the episodes with
+    a step). A consistent filter's pooled mean is its dimension (3 for a position); the
+    interval says whether the campaign could tell it from that. ``None`` with fewer than two
+    episodes.
+    """
+    sums = np.array([float(np.sum(e)) for e in per_episode if len(e)])
+    counts = np.array([len(e) for e in per_episode if len(e)], dtype=float)
+    if sums.size < 2:
+        return None
+    mean = sums.sum() / counts.sum()
+    se = float(np.sqrt(sums.size / (sums.size - 1) * np.sum((sums - mean * counts) ** 2)) / counts.sum())
+    half = float(norm.ppf(0.975)) * se
+    return float(mean - half), float(mean + half)
+
+
 def reliability_bins(pairs: Sequence[int], hits: Sequence[int], promised_sum: Sequence[float]) -> tuple[ReliabilityBin, ...]:
     """Bins from pooled per-bin counts (pairs, hits) and sums of promised probabilities."""
     out = []
@@ -78,6 +100,8 @@ class MethodSummary:
     drone_nees_share_above_chi2_95: float | None
     relative_nees_mean: float | None
     relative_nees_share_above_chi2_95: float | None
+    drone_nees_ci95: tuple[float, float] | None  #: 95 % interval of drone_nees_mean, episodes as clusters
+    relative_nees_ci95: tuple[float, float] | None
     model_step_error_median_m: float | None
     model_step_error_p95_m: float | None
     model_step_error_max_m: float | None
@@ -174,6 +198,8 @@ def summarise(results: Sequence[Any], methods: Sequence[str], c_min: float) -> d
             drone_nees_share_above_chi2_95=float((d_nees > NEES_95).mean()) if d_nees.size else None,
             relative_nees_mean=float(r_nees.mean()) if r_nees.size else None,
             relative_nees_share_above_chi2_95=float((r_nees > NEES_95).mean()) if r_nees.size else None,
+            drone_nees_ci95=nees_mean_ci95([r.drone_nees for r in rows]),
+            relative_nees_ci95=nees_mean_ci95([r.relative_nees for r in rows]),
             model_step_error_median_m=float(np.median(model_err)) if model_err.size else None,
             model_step_error_p95_m=float(np.percentile(model_err, 95)) if model_err.size else None,
             model_step_error_max_m=float(model_err.max()) if model_err.size else None,
