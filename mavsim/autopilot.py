@@ -23,13 +23,14 @@ from collections import Counter
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
-from mavsim.missions import MissionStore
+from mavsim.missions import MissionStore, local_items
 from mavsim.params import ParamStore
 from mavsim.personalities.base import SEV_WARNING, Commander, OffboardSetpoint
-from mavsim.telemetry import MSG_AUTOPILOT_VERSION, STREAM_IDS, TelemetryBuilder
+from mavsim.telemetry import EARTH_RADIUS_M, MSG_AUTOPILOT_VERSION, STREAM_IDS, TelemetryBuilder
 from mavsim.vehicle import VehicleState
 
 logger = logging.getLogger(__name__)
+
 
 __all__ = ["Autopilot", "SYSID", "COMPID", "statustext"]
 
@@ -169,6 +170,8 @@ class Autopilot:
             result = c.request_return(now_s, veh)
         elif command == 17:  # MAV_CMD_NAV_LOITER_UNLIM
             result = c.request_hold(now_s, veh)
+        elif command == 300:  # MAV_CMD_MISSION_START, param1 the first item
+            result = c.request_mission_start(p[0], now_s, veh)
         elif command in (512, 520):  # REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES
             msg_id = MSG_AUTOPILOT_VERSION if command == 520 else _finite_int(p[0])
             reply = None
@@ -282,8 +285,17 @@ class Autopilot:
         return [self._param_value(name)]
 
     def _on_mission(self, msg, now_us, veh, estimate):
-        """The mission protocol: :class:`mavsim.missions.MissionStore` stores and serves the items."""
-        return self.missions.handle(msg)
+        """The mission protocol: :class:`mavsim.missions.MissionStore` stores and serves the items;
+        the commander is told the stored mission (local NED) when it changed, and the current
+        item when a client sets it."""
+        before = self.missions.items[0]
+        replies = self.missions.handle(msg)
+        if self.missions.items[0] is not before:      # an upload completed, or a clear
+            self.cmdr.load_mission(local_items(self.missions.items[0], self.tm.home, EARTH_RADIUS_M),
+                                   self.missions.current)
+        elif msg.get_type() == "MISSION_SET_CURRENT":
+            self.cmdr.set_mission_current(self.missions.current)
+        return replies
 
     _on_mission_request_list = _on_mission_count = _on_mission_clear_all = _on_mission
     _on_mission_request_int = _on_mission_request = _on_mission_item_int = _on_mission_set_current = _on_mission

@@ -8,19 +8,25 @@ and MISSION_CLEAR_ALL clear; MISSION_SET_CURRENT is answered with MISSION_CURREN
 with a MISSION_ACK naming why: more than :data:`MAX_ITEMS` (NO_SPACE), an item in a frame
 PX4 does not take for its type (UNSUPPORTED_FRAME), an item out of sequence during an
 upload (INVALID_SEQUENCE, answered with the request again as PX4 does). Not yet: the
-vehicle's own re-requests after a timeout, and flying the mission (AUTO.MISSION).
+vehicle's own re-requests after a timeout. :func:`local_items` gives a personality the stored
+mission in local NED to fly (PX4's AUTO.MISSION: :mod:`mavsim.personalities.px4_mission`).
 Pure: no clock; messages in, messages out.
 """
 
 from __future__ import annotations
 
 import logging
+import math
+from dataclasses import dataclass
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 logger = logging.getLogger(__name__)
 
 MAX_ITEMS = 1000
+#: Frames whose altitude is relative to home (GLOBAL_RELATIVE_ALT, its _INT twin); the others AMSL.
+_RELATIVE_FRAMES = frozenset({3, 6})
 #: Frames PX4 stores mission items in (global AMSL / relative, int or not, and MISSION for DO_ items).
 _MISSION_FRAMES = frozenset({0, 2, 3, 5, 6})
 
@@ -85,3 +91,29 @@ class MissionStore:
                 self.current = int(msg.seq)
             return [mavlink2.MAVLink_mission_current_message(self.current, len(self.items[0]))]
         return []
+
+
+@dataclass(frozen=True)
+class MissionItem:
+    """One stored mission item with its position in local NED (m)."""
+
+    seq: int
+    command: int
+    params: tuple[float, float, float, float]
+    position_ned_m: np.ndarray
+
+
+def local_items(items: list, home: tuple[float, float, float], earth_radius_m: float) -> list[MissionItem]:
+    """The stored MISSION_ITEM_INT messages as :class:`MissionItem` about ``home`` (lat deg, lon deg,
+    alt m AMSL): the flat-earth map mavsim's telemetry uses, inverted. Positions are taken as
+    they are (latitude and longitude 0 is a point off Africa, as for PX4)."""
+    lat0, lon0, alt0 = home
+    cos_lat = math.cos(math.radians(lat0))
+    out = []
+    for m in items:
+        north = math.radians(m.x * 1e-7 - lat0) * earth_radius_m
+        east = math.radians(m.y * 1e-7 - lon0) * earth_radius_m * cos_lat
+        down = -float(m.z) if m.frame in _RELATIVE_FRAMES else alt0 - float(m.z)
+        out.append(MissionItem(int(m.seq), int(m.command), (float(m.param1), float(m.param2), float(m.param3),
+                                                             float(m.param4)), np.array([north, east, down])))
+    return out

@@ -377,6 +377,16 @@ class Commander:
                 v[:2] *= vmax / h
         return v
 
+    def request_mission_start(self, first: float, now_s: float, vehicle: VehicleState) -> int:
+        """Not modelled: ArduPilot's AUTO mode is not flown by mavsim."""
+        return mavlink2.MAV_RESULT_UNSUPPORTED
+
+    def load_mission(self, items: list, current: int) -> None:
+        """Nothing: the stored mission is served (mission protocol), not flown."""
+
+    def set_mission_current(self, seq: int) -> None:
+        """Nothing (the mission is not flown)."""
+
     def position_aiding(self, unaided_s: float | None, now_s: float, vehicle: VehicleState) -> None:
         """Nothing: ArduPilot's EKF failsafe is not modelled (its personality refuses outages of
         ``gps_outage_max_s`` or more)."""

@@ -120,6 +120,16 @@ class Commander(Protocol):
     def request_arm(self, arm: bool, force: bool, now_s: float, vehicle: VehicleState) -> int:
         """MAV_CMD_COMPONENT_ARM_DISARM (``force``: param2 21196)."""
 
+    def request_mission_start(self, first: float, now_s: float, vehicle: VehicleState) -> int:
+        """MAV_CMD_MISSION_START (param1 the first item; NaN or 0: the stored current one)."""
+
+    def load_mission(self, items: list, current: int) -> None:
+        """The stored mission (:class:`mavsim.missions.MissionItem` list, local NED) and
+        its current item, after an upload completed or a clear."""
+
+    def set_mission_current(self, seq: int) -> None:
+        """MISSION_SET_CURRENT: the mission goes on from item ``seq`` (at once, if flying)."""
+
     def accept_setpoint(self, sp: OffboardSetpoint, now_s: float) -> None:
         """A validated offboard setpoint arrived (proof of life; flown in the offboard mode)."""
 

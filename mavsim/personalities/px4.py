@@ -20,6 +20,10 @@ Imitated (see ``docs/PX4_FACTS.md``, sections 2, 3, 5 and 6):
   COM_OBL_RC_ACT fallback (0-2 Position hold, 3 Return, 4 Land, 5 Hold, 6-7 Land) and
   never re-enters OFFBOARD by itself. No failsafe while disarmed.
 - Takeoff climbs at MPC_TKO_SPEED to the target, then AUTO.LOITER.
+- AUTO.MISSION (MAV_CMD_MISSION_START, or the mode) flies the stored mission item by item
+  (:mod:`mavsim.personalities.px4_mission`), MISSION_CURRENT streamed at 1 Hz, MISSION_ITEM_REACHED sent
+  at once and again with each of the next ten MISSION_CURRENT (as measured); no mission:
+  "Mission start denied! No valid mission".
 - Dead reckoning (no GPS) for EKF2_NOAID_TOUT: the local position is invalid. Armed and
   airborne, PX4 says "Failsafe: blind land" and "Failsafe activated" and leaves any mode that
   needs a position for ALTCTL, descending at MPC_LAND_SPEED without horizontal position control
@@ -40,6 +44,8 @@ import math
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
+from mavsim.missions import MissionItem
+from mavsim.personalities.px4_mission import ACTIVE, COMPLETE, NO_MISSION, MissionFlight
 from mavsim.params import PARAM_TYPE_INT32, PARAM_TYPE_REAL32, ParamStore, ParamTable
 from mavsim.personalities.base import SEV_CRITICAL, SEV_INFO, OffboardSetpoint
 from mavsim.personalities.px4_response import Px4Response
@@ -58,6 +64,7 @@ MODES: dict[str, tuple[int, int]] = {
     "AUTO.LOITER": (4, 3),
     "AUTO.RTL": (4, 5),
     "AUTO.LAND": (4, 6),
+    "AUTO.MISSION": (4, 4),
     "OFFBOARD": (6, 0),
 }
 _MODE_BY_NUMBER = {v: k for k, v in MODES.items()}
@@ -65,12 +72,14 @@ _MODE_BY_NUMBER = {v: k for k, v in MODES.items()}
 START_MODES = ("POSCTL", "AUTO.LOITER", "AUTO.TAKEOFF", "AUTO.LAND", "AUTO.RTL", "OFFBOARD")
 #: Names PX4 uses in its messages.
 DISPLAY = {"ALTCTL": "Altitude", "POSCTL": "Position", "AUTO.TAKEOFF": "Takeoff", "AUTO.LOITER": "Hold", "AUTO.RTL": "Return",
-           "AUTO.LAND": "Land", "OFFBOARD": "Offboard"}
+           "AUTO.LAND": "Land", "AUTO.MISSION": "Mission", "OFFBOARD": "Offboard"}
 _MAIN_DISPLAY = {1: "Manual", 2: "Altitude", 3: "Position", 4: "Auto", 5: "Acro", 6: "Offboard",
                  7: "Stabilized", 8: "Rattitude"}
 _AUTO_SUB_DISPLAY = {0: "Mission", 1: "Ready", 4: "Mission", 7: "Follow target", 8: "Precision land"}
 
 POS_GAIN_PER_S = 1.0  # position-error to velocity gain (PX4 MPC_XY_P 0.95, MPC_Z_P 1.0)
+#: MISSION_ITEM_REACHED is sent again with the next ten MISSION_CURRENT (1 Hz): eleven in all, measured.
+REACHED_REPEATS = 10
 _FALLBACK = {0: "POSCTL", 1: "POSCTL", 2: "POSCTL", 3: "AUTO.RTL", 4: "AUTO.LAND", 5: "AUTO.LOITER",
              6: "AUTO.LAND", 7: "AUTO.LAND"}
 
@@ -100,6 +109,8 @@ PARAMS: ParamTable = {
     "MAV_SYS_ID": (1, PARAM_TYPE_INT32, 1, 250),
     "NAV_DLL_ACT": (0, PARAM_TYPE_INT32, 0, 6),
     "EKF2_NOAID_TOUT": (5000000, PARAM_TYPE_INT32, 500000, 10000000),   # us of dead reckoning allowed
+    "NAV_ACC_RAD": (2.0, PARAM_TYPE_REAL32, 0.05, 200.0),     # a waypoint's default acceptance radius, m
+    "NAV_MC_ALT_RAD": (0.8, PARAM_TYPE_REAL32, 0.05, 200.0),  # a mission altitude's acceptance, m
 }
 
 #: Stream name -> default rate (Hz): PX4's on the offboard link.
@@ -114,6 +125,7 @@ STREAM_RATES_HZ: dict[str, float] = {
     "HOME_POSITION": 0.5,
     "GPS_RAW_INT": 0.0,  # off unless set or requested (MAV_CMD_REQUEST_MESSAGE 24)
     "TIMESYNC": 10.0,  # requests (tc1 0, ts1 the boot clock in ns), as PX4 sends them on its links
+    "MISSION_CURRENT": 1.0,
 }
 
 
@@ -191,6 +203,12 @@ class Commander:
         self.texts: list[tuple[int, str]] = []
         self.mode_changes: list[tuple[float, str]] = [(0.0, mode)]
         self.announce: list[int] = []
+        self.mission_items: list[MissionItem] = []   # the stored mission, local NED (load_mission)
+        self.mission_start = 0                        # the stored current item (MISSION_SET_CURRENT)
+        self.mission: MissionFlight | None = None     # the mission being flown (AUTO.MISSION)
+        self._reached: list[int] = []                 # items reached, to be sent (MISSION_ITEM_REACHED)
+        self._reached_repeats = 0                     # times the last one is sent again, with MISSION_CURRENT
+        self._last_reached = 0
         self._acc_integrator = np.zeros(3)
         self._enter(mode, vehicle, 0.0)
 
@@ -232,8 +250,42 @@ class Commander:
         return True
 
     def message(self, msg_id: int, now_us: int, vehicle: VehicleState, est_pos: np.ndarray, est_vel: np.ndarray):
-        """None: PX4's messages are the generic ones."""
+        """The mission's MISSION_CURRENT (42) and MISSION_ITEM_REACHED (46); None for the rest
+        (PX4's other messages are the generic ones)."""
+        if msg_id == 42:
+            if self._reached_repeats > 0:             # PX4 sends the last item reached again with it
+                self._reached_repeats -= 1
+                self._reached.append(self._last_reached)
+                self.announce.append(46)
+            m = self.mission
+            if m is None:     # PX4 said "no mission" (1) with a mission stored but not started (measured)
+                return mavlink2.MAVLink_mission_current_message(self.mission_start, len(self.mission_items), NO_MISSION, 0)
+            return mavlink2.MAVLink_mission_current_message(m.current, m.total, m.state,
+                                                            int(self.mode == "AUTO.MISSION"))
+        if msg_id == 46 and self._reached:
+            return mavlink2.MAVLink_mission_item_reached_message(self._reached.pop(0))
         return None
+
+    def load_mission(self, items: list[MissionItem], current: int) -> None:
+        """A new stored mission (local NED) and its current item, after an upload or a clear; a
+        mission in flight flies on until AUTO.MISSION is entered again."""
+        self.mission_items = list(items)
+        self.mission_start = int(current)
+
+    def set_mission_current(self, seq: int) -> None:
+        """MISSION_SET_CURRENT: the mission goes on from item ``seq``, at once if it is flying."""
+        self.mission_start = int(seq)
+        if self.mission is not None and self.mission.items is self.mission_items:
+            self.mission.jump(int(seq))
+
+    def request_mission_start(self, first: float, now_s: float, vehicle: VehicleState) -> int:
+        """MAV_CMD_MISSION_START (param1: the first item; NaN or 0: the stored current one)."""
+        if not self.mission_items:
+            self._say(SEV_CRITICAL, "Mission start denied! No valid mission")
+            return mavlink2.MAV_RESULT_DENIED
+        if math.isfinite(first) and 0 < first < len(self.mission_items):
+            self.mission_start = int(first)
+        return self.request_mode(*MODES["AUTO.MISSION"], now_s, vehicle)
 
     def offboard_signal(self, now_s: float) -> bool:
         """True while the newest accepted setpoint is younger than COM_OF_LOSS_T."""
@@ -268,6 +320,15 @@ class Commander:
         if name == "OFFBOARD" and self.armed and not self.offboard_signal(now_s):
             self._say(SEV_CRITICAL, "Switching to Offboard is currently not available")
             return self.offboard_reject_ack
+        if name == "AUTO.MISSION":
+            if not self.mission_items:
+                self._say(SEV_CRITICAL, "Mission start denied! No valid mission")
+                return mavlink2.MAV_RESULT_DENIED
+            m = self.mission
+            if m is None or m.items is not self.mission_items or m.state != ACTIVE:
+                self.mission = MissionFlight(self.mission_items, self.params, POS_GAIN_PER_S, self.mission_start)
+            elif self.mode != "AUTO.MISSION":
+                m.jump(m.current)          # back in the mission: on from the item it was at
         if name == "AUTO.TAKEOFF" and self.mode != "AUTO.TAKEOFF":
             self.takeoff_z = min(vehicle.position_ned_m[2], -self.params["MIS_TAKEOFF_ALT"])
         self.failsafe = False
@@ -389,6 +450,18 @@ class Commander:
             else:
                 v[:2] = POS_GAIN_PER_S * d
                 v[2] = self.params["MPC_LAND_SPEED"]
+        elif self.mode == "AUTO.MISSION" and self.mission is not None:
+            v = self.mission.command(now_s, p)
+            if self.mission.reached:
+                self._reached += self.mission.reached
+                self.announce += [46] * len(self.mission.reached)
+                self._last_reached, self._reached_repeats = self.mission.reached[-1], REACHED_REPEATS
+                self.mission.reached.clear()
+            if self.mission.landing and vehicle.on_ground:
+                self.mission.state = COMPLETE
+            if self.mission.hand_over is not None:
+                self._enter(self.mission.hand_over, vehicle, now_s)
+                self.mission.hand_over = None
         elif self.mode == "ALTCTL":   # no horizontal position: level; a failsafe's blind land descends
             v = np.array([0.0, 0.0, self.params["MPC_LAND_SPEED"] if self.failsafe
                           else POS_GAIN_PER_S * (self.hold_point[2] - p[2])])
