@@ -21,9 +21,9 @@ Imitated (see ``docs/PX4_FACTS.md``, sections 2, 3, 5 and 6):
   never re-enters OFFBOARD by itself. No failsafe while disarmed.
 - Takeoff climbs at MPC_TKO_SPEED to the target, then AUTO.LOITER.
 - AUTO.MISSION (MAV_CMD_MISSION_START, or the mode) flies the stored mission item by item
-  (:mod:`mavsim.personalities.px4_mission`), MISSION_CURRENT streamed at 1 Hz, MISSION_ITEM_REACHED sent
-  at once and again with each of the next ten MISSION_CURRENT (as measured); no mission:
-  "Mission start denied! No valid mission".
+  (:mod:`mavsim.personalities.px4_mission`), MISSION_CURRENT streamed at 1 Hz,
+  MISSION_ITEM_REACHED sent at once and again with each of the next ten MISSION_CURRENT (as
+  measured); no mission: "Mission start denied! No valid mission".
 - Dead reckoning (no GPS) for EKF2_NOAID_TOUT: the local position is invalid. Armed and
   airborne, PX4 says "Failsafe: blind land" and "Failsafe activated" and leaves any mode that
   needs a position for ALTCTL, descending at MPC_LAND_SPEED without horizontal position control
@@ -45,9 +45,9 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from mavsim.missions import MissionItem
-from mavsim.personalities.px4_mission import ACTIVE, COMPLETE, NO_MISSION, MissionFlight
 from mavsim.params import PARAM_TYPE_INT32, PARAM_TYPE_REAL32, ParamStore, ParamTable
 from mavsim.personalities.base import SEV_CRITICAL, SEV_INFO, OffboardSetpoint
+from mavsim.personalities.px4_mission import ACTIVE, COMPLETE, NO_MISSION, MissionFlight
 from mavsim.personalities.px4_response import Px4Response
 from mavsim.vehicle import VehicleCommand, VehicleState
 
@@ -71,8 +71,8 @@ _MODE_BY_NUMBER = {v: k for k, v in MODES.items()}
 #: The modes ``[sim] start_mode`` accepts, in the order its error message lists them.
 START_MODES = ("POSCTL", "AUTO.LOITER", "AUTO.TAKEOFF", "AUTO.LAND", "AUTO.RTL", "OFFBOARD")
 #: Names PX4 uses in its messages.
-DISPLAY = {"ALTCTL": "Altitude", "POSCTL": "Position", "AUTO.TAKEOFF": "Takeoff", "AUTO.LOITER": "Hold", "AUTO.RTL": "Return",
-           "AUTO.LAND": "Land", "AUTO.MISSION": "Mission", "OFFBOARD": "Offboard"}
+DISPLAY = {"ALTCTL": "Altitude", "POSCTL": "Position", "AUTO.TAKEOFF": "Takeoff", "AUTO.LOITER": "Hold",
+           "AUTO.RTL": "Return", "AUTO.LAND": "Land", "AUTO.MISSION": "Mission", "OFFBOARD": "Offboard"}
 _MAIN_DISPLAY = {1: "Manual", 2: "Altitude", 3: "Position", 4: "Auto", 5: "Acro", 6: "Offboard",
                  7: "Stabilized", 8: "Rattitude"}
 _AUTO_SUB_DISPLAY = {0: "Mission", 1: "Ready", 4: "Mission", 7: "Follow target", 8: "Precision land"}
@@ -259,7 +259,8 @@ class Commander:
                 self.announce.append(46)
             m = self.mission
             if m is None:     # PX4 said "no mission" (1) with a mission stored but not started (measured)
-                return mavlink2.MAVLink_mission_current_message(self.mission_start, len(self.mission_items), NO_MISSION, 0)
+                return mavlink2.MAVLink_mission_current_message(self.mission_start, len(self.mission_items),
+                                                                NO_MISSION, 0)
             return mavlink2.MAVLink_mission_current_message(m.current, m.total, m.state,
                                                             int(self.mode == "AUTO.MISSION"))
         if msg_id == 46 and self._reached:

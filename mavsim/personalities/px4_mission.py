@@ -54,7 +54,7 @@ class MissionFlight:
 
     Parameters
     ----------
-    items : the mission (:func:`local_items`), in order.
+    items : the mission (:func:`mavsim.missions.local_items`), in order.
     params : the autopilot's parameter store (MPC_XY_CRUISE, MPC_TKO_SPEED, MPC_LAND_SPEED,
         NAV_ACC_RAD, NAV_MC_ALT_RAD are read as the flight goes).
     pos_gain_per_s : the position gain that slows a leg's end (m/s per m).
@@ -116,7 +116,8 @@ class MissionFlight:
             target = item.position_ned_m
             if not self._climbed:
                 v = self.gain * (self._started_here - p)
-                v[2] = max(-float(prm["MPC_TKO_SPEED"]), min(float(prm["MPC_TKO_SPEED"]), self.gain * (target[2] - p[2])))
+                climb = float(prm["MPC_TKO_SPEED"])
+                v[2] = max(-climb, min(climb, self.gain * (target[2] - p[2])))
                 self._climbed = abs(target[2] - p[2]) < alt_rad
                 return v, False
             d = target - p
@@ -133,7 +134,8 @@ class MissionFlight:
             d = target - p
             horizontal = math.hypot(d[0], d[1])
             radius = item.params[1] if cmd == NAV_WAYPOINT and item.params[1] > 0 else float(prm["NAV_ACC_RAD"])
-            if horizontal < radius and (cmd == NAV_LAND or abs(d[2]) < alt_rad):  # a landing: its altitude is the ground
+            # a landing's altitude is the ground: only its horizontal position is reached
+            if horizontal < radius and (cmd == NAV_LAND or abs(d[2]) < alt_rad):
                 if cmd == NAV_LAND:
                     self.landing = True
                     self.reached.append(item.seq)  # PX4 named the land item when its descent began
