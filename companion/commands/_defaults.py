@@ -14,6 +14,8 @@ DEFAULT_URL = "udpin:0.0.0.0:14540"
 FORMULATIONS: tuple[str, ...] = ("hyperplane", "paper", "deterministic", "bhattacharyya")
 #: companion.core.planner.config.SOLVERS
 SOLVERS: tuple[str, ...] = ("osqp", "piqp")
+#: companion.mavlink.offboard.TAKEOVER_CHOICES
+TAKEOVER_CHOICES = ("always", "watch")
 #: companion.offline.campaign.generate.METHODS
 METHODS = ("hyperplane", "paper", "deterministic", "bhattacharyya")
 #: companion.offline.campaign.generate.FAMILIES

@@ -12,6 +12,7 @@ import dataclasses
 
 from companion.commands._argtypes import fence_file, goal_spec, integer_at_least, mission_source
 from companion.errors import ConfigError
+from companion.commands._defaults import TAKEOVER_CHOICES
 
 
 def add_recorded_flight_flags(p: argparse.ArgumentParser) -> None:
@@ -29,6 +30,7 @@ def add_recorded_flight_flags(p: argparse.ArgumentParser) -> None:
                    help="the recorded run's --autopilot")
     p.add_argument("--reengage", action="store_true", help="the recorded run re-requested OFFBOARD (fly --reengage)")
     p.add_argument("--no-c-max", action="store_true", help="the recorded run dropped c_max (fly --no-c-max)")
+    p.add_argument("--takeover", choices=TAKEOVER_CHOICES, default=None, help="the recorded run's --takeover")
 
 
 def planner_overrides(args: argparse.Namespace) -> dict:
@@ -51,6 +53,7 @@ def offboard_settings(scenario_offboard, args: argparse.Namespace):
         hold_after_goal_s=args.exit_after_goal,
         target_system=scenario_offboard.target_system if args.target_system is None else args.target_system,
         autopilot=scenario_offboard.autopilot if args.autopilot is None else args.autopilot,
+        takeover=scenario_offboard.takeover if getattr(args, "takeover", None) is None else args.takeover,
     )
 
 

@@ -24,7 +24,7 @@ from companion.commands._argtypes import (
     scenario_file,
     tlog_megabytes,
 )
-from companion.commands._defaults import DEFAULT_URL, FORMULATIONS
+from companion.commands._defaults import DEFAULT_URL, FORMULATIONS, TAKEOVER_CHOICES
 from companion.commands._flight_flags import goal_keywords, offboard_settings, planner_overrides
 from companion.commands._view import add_view_arguments, open_view
 from companion.errors import CompanionError, ConfigError
@@ -101,6 +101,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--takeoff-alt", type=positive_number, default=None, metavar="M", help="take off to M metres above home first")
     p.add_argument("--reengage", action="store_true", help="re-request OFFBOARD after the pilot took over, and take over a vehicle found armed in "
                         "a failsafe at start, as after a restart (default: never)")
+    p.add_argument("--takeover", choices=TAKEOVER_CHOICES, default=None,
+                   help="always: fly the whole flight in OFFBOARD (GUIDED); watch: never command, let the autopilot fly "
+                        "its mission (started with --arm, else by the operator) and warn of predicted conflicts on its "
+                        "path (needs --mission; docs/MISSIONS.md) (default: the scenario's [offboard] takeover, else always)")
     p.add_argument("--formulation", default=None, choices=FORMULATIONS, help="planner formulation (overrides the scenario)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--tlog", type=output_file, default=None, help="record the link to this tlog")
@@ -227,8 +231,13 @@ def run(args: argparse.Namespace) -> int:
         report[key] = [(round(t - started, 2), text) for t, text in report[key]]
     if report.get("goal_reached_companion_t_s") is not None:
         report["goal_reached_companion_t_s"] = round(report["goal_reached_companion_t_s"] - started, 2)
-    if "mission_items_reached_t_s" in report:
-        report["mission_items_reached_t_s"] = [round(t - started, 2) for t in report["mission_items_reached_t_s"]]
+    for key in ("mission_items_reached_t_s", "autopilot_items_reached_t_s"):
+        if key in report:
+            report[key] = [round(t - started, 2) for t in report[key]]
+    for conflict in report.get("watch_conflicts", []):
+        for key in ("start_s", "end_s"):
+            if conflict[key] is not None:
+                conflict[key] = round(conflict[key] - started, 2)
     if stats is not None:
         report.update(stats.summary())
         report["wall_s"] = round(stats.wall_s, 2)

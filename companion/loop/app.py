@@ -23,6 +23,8 @@ Every edge (lockstep, real time, replay) makes those calls through one
 - :class:`~companion.loop.executor.Executor`: the plan in force to this tick's command, braking;
 - :class:`~companion.loop.commanding.Commanding`: the loop's mode and each tick's command and setpoint;
 - :class:`~companion.loop.goal_stage.GoalStage`: placing the goal before flying, a mission's messages;
+- :class:`~companion.loop.mission_watch.MissionWatch`: the autopilot's own mission flight, its path
+  predicted and judged, when the companion only watches (``[offboard] takeover = "watch"``);
 - an injected :class:`~companion.loop.engagement.OffboardSequence` (arm, take-off, engage, hand back);
 - :class:`~companion.loop.supervisor.Supervisor`: HEARTBEAT, TIMESYNC, announcements.
 """
@@ -48,6 +50,7 @@ from companion.loop.obstacle_sources import ObstacleSource
 from companion.loop.intake.obstacles import ObstacleIntake
 from companion.loop.mission_file import read_mission_file
 from companion.loop.mission_goal import MissionGoal
+from companion.loop.mission_watch import MissionProgress, MissionWatch
 from companion.loop.perception import Perception
 from companion.loop.plan_cycle import PlanArrival, PlanCycle
 from companion.loop.planning import InlinePlanning, PlanningService
@@ -61,7 +64,8 @@ from companion.loop.supervisor import Supervisor
 from companion.loop.vehicle_reference import VehicleReference
 from companion.mavlink import messages
 from companion.mavlink.link import Received
-from companion.mavlink.offboard import Notify, OffboardConfig, OffboardSequencer, SendCommand
+from companion.errors import ConfigError
+from companion.mavlink.offboard import Notify, OffboardConfig, OffboardSequencer, Phase, SendCommand
 
 logger = logging.getLogger(__name__)
 
@@ -154,13 +158,23 @@ class Companion:
                                executor=self.executor, perception=self.perception, supervisor=self.supervisor,
                                state=self.state, records=self.records, tally=self.tally,
                                on_goal_reached=self.sequencer.on_goal_reached, on_at_goal=self.sequencer.on_at_goal)
-        self.inbound = InboundRouter(self.obstacles, self.perception, self.sequencer, self.state)
+        #: the autopilot's progress through its own mission, as it reports it
+        self.progress = MissionProgress()
+        self.inbound = InboundRouter(self.obstacles, self.perception, self.sequencer, self.state, self.progress)
         self.commanding = Commanding(self.settings, perception=self.perception, executor=self.executor,
                                      cycle=self.cycle, supervisor=self.supervisor, goal=self.builder.goal,
                                      state=self.state)
         #: hand-backs requested from outside the loop, as (link time s, reason), in order
         self.hand_backs: list[tuple[float, str]] = []
         self.goal_stage = GoalStage(self.builder.goal, self.sequencer, self.supervisor, fence=self.fence)
+        #: the autopilot's own mission flight watched (``[offboard] takeover = "watch"``), else None
+        self.watch: MissionWatch | None = None
+        if getattr(getattr(self.sequencer, "config", None), "takeover", "always") == "watch":
+            if not callable(getattr(self.builder.goal, "route_from", None)):
+                raise ConfigError("takeover \"watch\" needs a mission to watch: [mission] plan_file, or "
+                                  "companion fly --mission FILE|vehicle")
+            self.watch = MissionWatch(scenario.planner, self.settings, scenario.mission, builder=self.builder,
+                                      supervisor=self.supervisor, progress=self.progress)
 
     @property
     def goal_error(self) -> str | None:
@@ -265,6 +279,8 @@ class Companion:
         seq = self.sequencer.state
         if not seq.streaming:
             out.extend(self.commanding.released(t_s))
+            if self.watch is not None and seq.phase is Phase.WATCHING:
+                out.extend(self.watch.step(t_s, self.perception, bool(getattr(self.sequencer, "vehicle_in_mission", False))))
             return out
         command, said = self.commanding.command(t_s, seq.engaged)
         out.extend(said)

@@ -132,6 +132,9 @@ class MissionConfig:
 
     ``goal_tolerance_m`` has no default: mavsim reads the same key for its truth
     (time to goal), so the scenario file is its one source.
+    ``autopilot_speed_mps``: the speed at which the autopilot flies its own mission legs (m/s;
+    PX4's ``MPC_XY_CRUISE``, 5 by default; ArduCopter's ``WPNAV_SPEED`` / 100): the companion
+    predicts the autopilot's path with it while watching (``[offboard] takeover = "watch"``).
     """
 
     goal_ned_m: np.ndarray | None
@@ -144,6 +147,7 @@ class MissionConfig:
     plan_file: str | None = None
     plan_upload: bool = True
     fence_file: str | None = None
+    autopilot_speed_mps: float = 5.0
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -166,6 +170,7 @@ class MissionConfig:
         set_("goal_tolerance_m", check.number("goal_tolerance_m", self.goal_tolerance_m, positive=True, hi=1000.0))
         set_("waypoint_spacing_m", check.number("waypoint_spacing_m", self.waypoint_spacing_m, positive=True, hi=1e4))
         set_("goal_wait_s", check.number("goal_wait_s", self.goal_wait_s, positive=True, hi=3600.0))
+        set_("autopilot_speed_mps", check.number("autopilot_speed_mps", self.autopilot_speed_mps, positive=True, hi=100.0))
         if self.plan_file is None:
             self.goal_spec  # the frame's own checks (latitude range, distance)
 

@@ -5,8 +5,8 @@ Obstacle links, traffic reports and GPS_GLOBAL_ORIGIN go to the
 rest is decoded once (:func:`companion.mavlink.messages.decode`) and goes by kind: the
 autopilot's HEARTBEATs to the sequence, poses to :class:`~companion.loop.perception.Perception`
 (the autopilot's to the drone filter, other systems' to tracks), and the autopilot's
-acknowledgements, texts, home position and clock to where they belong. Bad content is
-counted, never raised.
+acknowledgements, texts, home position, clock and mission progress to where they belong. Bad
+content is counted, never raised.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.loop.engagement import OffboardSequence
 from companion.loop.intake.obstacles import ObstacleIntake
+from companion.loop.mission_watch import MissionProgress
 from companion.loop.perception import Perception, PoseOutcome
 from companion.loop.records import CompanionState
 from companion.loop.vehicle_clock import link_ns
@@ -30,8 +31,10 @@ class InboundRouter:
     """Routes every inbound message of one companion (see the module docstring)."""
 
     def __init__(self, obstacles: ObstacleIntake, perception: Perception, sequencer: OffboardSequence,
-                 state: CompanionState) -> None:
+                 state: CompanionState, progress: MissionProgress | None = None) -> None:
         self.obstacles, self.perception, self.sequencer, self.state = obstacles, perception, sequencer, state
+        #: the autopilot's progress through its own mission (MISSION_CURRENT, MISSION_ITEM_REACHED)
+        self.progress = progress if progress is not None else MissionProgress()
 
     def route(self, rx: Received) -> list[mavlink2.MAVLink_message]:
         """Take one inbound message; return what must answer it at once (the autopilot's TIMESYNC request)."""
@@ -78,6 +81,11 @@ class InboundRouter:
             self.sequencer.on_estimator_status(rx.t_s, decoded.flags)
         elif isinstance(decoded, messages.LandedState):
             self.sequencer.on_landed_state(rx.t_s, decoded.on_ground)
+        elif isinstance(decoded, messages.MissionCurrent):
+            self.progress.on_current(rx.t_s, decoded)
+        elif isinstance(decoded, messages.MissionItemReached):
+            if self.progress.on_reached(rx.t_s, decoded.seq):
+                logger.info("autopilot reached mission item %d", decoded.seq)
         return []
 
     def _timesync(self, t_rx: float, sync: messages.TimeSync) -> list[mavlink2.MAVLink_message]:

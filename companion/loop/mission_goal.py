@@ -187,6 +187,28 @@ class MissionGoal:
                 return jump.to
         return index + 1 if index + 1 < len(self.waypoints) else None
 
+    def route_from(self, current_seq: int) -> np.ndarray:
+        """The waypoints the autopilot flies from its current item ``current_seq`` on (NED m, (K, 3)), as
+        it flies them: the first waypoint at or after that item, then the next ones, a DO_JUMP with
+        jumps left followed once (a patrol's next lap; each waypoint at most twice). Empty once the
+        current item is past the last waypoint (a landing, a return: the path holds where it is)."""
+        start = next((k for k, w in enumerate(self.waypoints) if w.seq >= current_seq), None)
+        if start is None:
+            return np.empty((0, 3))
+        order: list[int] = []
+        followed: set[int] = set()
+        index: int | None = start
+        while index is not None and len(order) < 2 * len(self.waypoints):
+            order.append(index)
+            jump = next((j for j in self.jumps if j.after == index and j.seq not in followed
+                         and (j.repeat == JUMP_FOREVER or j.taken < j.repeat)), None)
+            if jump is not None:
+                followed.add(jump.seq)
+                index = jump.to
+            else:
+                index = index + 1 if index + 1 < len(self.waypoints) else None
+        return np.array([self.waypoints[k].position for k in order], dtype=float).reshape(-1, 3)
+
     # ------------------------------------------------------------------ preparation
 
     def on_message(self, t_s: float, msg) -> list:

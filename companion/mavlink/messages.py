@@ -214,6 +214,27 @@ class LandedState:
 
 
 @dataclass(frozen=True)
+class MissionCurrent:
+    """MISSION_CURRENT: the sender's current mission item ``seq``, the mission's ``total`` items
+    (MAVLink 2 extension: 65535 when unknown) and ``mission_state`` (MISSION_STATE: 0 unknown,
+    1 no mission, 2 not started, 3 active, 4 paused, 5 complete)."""
+
+    key: Key
+    seq: int
+    total: int = 65535
+    mission_state: int = 0
+
+
+@dataclass(frozen=True)
+class MissionItemReached:
+    """MISSION_ITEM_REACHED: the sender reached mission item ``seq`` (PX4 repeats it with the next
+    MISSION_CURRENT messages: count distinct items, not messages)."""
+
+    key: Key
+    seq: int
+
+
+@dataclass(frozen=True)
 class TimeSync:
     """TIMESYNC: a request when ``tc1_ns`` is 0 (``ts1_ns`` the sender's clock), else an answer
     (``tc1_ns`` the answerer's clock on receipt, ``ts1_ns`` the request's echoed). Nanoseconds."""
@@ -237,7 +258,7 @@ class Rejected:
 
 
 Decoded = Union[VehicleHeartbeat, PoseObservation, CommandAck, StatusText, HomePosition, EstimatorStatus, LandedState,
-                TimeSync, Rejected]
+                MissionCurrent, MissionItemReached, TimeSync, Rejected]
 
 
 # --------------------------------------------------------------------------- decoding
@@ -324,6 +345,17 @@ def decode_ekf_status_report(msg) -> EstimatorStatus:
 def decode_extended_sys_state(msg) -> LandedState:
     """EXTENDED_SYS_STATE (245) to :class:`LandedState`."""
     return LandedState(key=source_key(msg), landed_state=int(msg.landed_state))
+
+
+def decode_mission_current(msg) -> MissionCurrent:
+    """MISSION_CURRENT (42) to :class:`MissionCurrent` (a MAVLink 1 packet has no ``total`` nor state)."""
+    return MissionCurrent(key=source_key(msg), seq=int(msg.seq), total=int(getattr(msg, "total", 65535) or 65535),
+                          mission_state=int(getattr(msg, "mission_state", 0) or 0))
+
+
+def decode_mission_item_reached(msg) -> MissionItemReached:
+    """MISSION_ITEM_REACHED (46) to :class:`MissionItemReached`."""
+    return MissionItemReached(key=source_key(msg), seq=int(msg.seq))
 
 
 def covariance_from_upper_triangle(values, *, what: str) -> np.ndarray | None | str:
@@ -475,6 +507,8 @@ _DECODERS = {
     "HOME_POSITION": decode_home_position,
     "EKF_STATUS_REPORT": decode_ekf_status_report,
     "EXTENDED_SYS_STATE": decode_extended_sys_state,
+    "MISSION_CURRENT": decode_mission_current,
+    "MISSION_ITEM_REACHED": decode_mission_item_reached,
     "TIMESYNC": decode_timesync,
 }
 
@@ -658,6 +692,12 @@ def set_mode_command(autopilot: Autopilot, role: ModeRole, armed: bool, **target
 def arm_command(arm: bool, **target) -> mavlink2.MAVLink_command_long_message:
     """MAV_CMD_COMPONENT_ARM_DISARM (400): param1 = 1 arm, 0 disarm."""
     return command_long(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, (1.0 if arm else 0.0,), **target)
+
+
+def mission_start_command(**target) -> mavlink2.MAVLink_command_long_message:
+    """MAV_CMD_MISSION_START (300): param1 0 and param2 0, the stored mission from its current item
+    to its end (PX4 switches to AUTO.MISSION; the vehicle must be armed)."""
+    return command_long(mavlink2.MAV_CMD_MISSION_START, (0.0, 0.0), **target)
 
 
 def takeoff_command(altitude_amsl_m: float = math.nan, **target) -> mavlink2.MAVLink_command_long_message:

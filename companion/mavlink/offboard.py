@@ -22,6 +22,15 @@ Phases::
     ARMING / TAKEOFF / REQUEST_OFFBOARD --retries exhausted--> GAVE_UP
     WAIT_AUTOPILOT --found armed in a failsafe (CRITICAL), no ``reengage``--> GAVE_UP
 
+With ``takeover = "watch"`` the companion never commands the vehicle: the autopilot flies its
+own stored mission and the loop watches its path (:mod:`companion.loop.mission_watch`)::
+
+    WAIT_AUTOPILOT -> [ARMING -> START_MISSION] -> WATCHING --disarmed after its mission--> WATCH_ENDED
+
+START_MISSION (only with ``arm``, once a run) sends MAV_CMD_MISSION_START until the HEARTBEAT
+shows the mission mode (retried as any command); without ``arm`` the operator arms and starts
+the mission. Nothing is streamed while watching.
+
 What differs between autopilots is the autopilot's
 :class:`~companion.mavlink.autopilots.base.EngagementPlan`, never a branch on its name. ArduPilot's
 (ArduCopter) adds WAIT_READY (nothing is commanded until its estimator status says it can fly,
@@ -95,6 +104,9 @@ class Phase(enum.Enum):
     WAIT_ARMED = "WAIT_ARMED"
     PRESTREAM = "PRESTREAM"
     REQUEST_OFFBOARD = "REQUEST_OFFBOARD"
+    START_MISSION = "START_MISSION"
+    WATCHING = "WATCHING"
+    WATCH_ENDED = "WATCH_ENDED"
     ENGAGED = "ENGAGED"
     HANDING_BACK = "HANDING_BACK"
     HELD = "HELD"
@@ -105,7 +117,7 @@ class Phase(enum.Enum):
 
 _STREAMING = frozenset({Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED, Phase.HANDING_BACK})
 #: Phases in which nothing more happens (no heartbeat watch, no commands).
-_FINAL = frozenset({Phase.LINK_LOST, Phase.GAVE_UP, Phase.PILOT_TOOK_OVER, Phase.HELD})
+_FINAL = frozenset({Phase.LINK_LOST, Phase.GAVE_UP, Phase.PILOT_TOOK_OVER, Phase.HELD, Phase.WATCH_ENDED})
 
 
 #: Upper bound of every offboard duration setting (s): a day is already absurd.
@@ -114,6 +126,10 @@ MAX_OFFBOARD_SECONDS = 86_400.0
 #: ``hand_back_mode`` values: the autopilot's hold (PX4 Hold, ArduCopter LOITER) or its brake
 #: (ArduCopter BRAKE; PX4's Hold brakes too).
 HAND_BACK_MODES = {"hold": ModeRole.HOLD, "brake": ModeRole.BRAKE}
+
+#: ``takeover`` values: ``"always"`` flies the whole flight in the offboard mode; ``"watch"`` never
+#: commands: the autopilot flies its own mission and the companion warns of predicted conflicts.
+TAKEOVER_CHOICES = ("always", "watch")
 
 #: A takeoff that ends by height (:attr:`EngagementPlan.takeoff_ends_by_height`) is complete when
 #: the vehicle's estimate is within this of the height asked (m) and climbs slower than
@@ -199,6 +215,11 @@ class OffboardConfig:
         Hand the vehicle back after braking this long (stale estimate, no valid plan) once
         the braking command is zero; None: the autopilot's default (PX4 never, ArduPilot 2 s:
         ArduCopter stays in GUIDED whatever happens to the stream).
+    takeover : str
+        ``"always"`` (default): the companion flies the vehicle in the offboard mode.
+        ``"watch"``: it never commands; the autopilot flies its stored mission (started by the
+        companion with ``arm``, else by the operator) and the companion follows it and warns of
+        predicted conflicts (WATCHING; ``companion fly --takeover watch``).
     """
 
     prestream_s: float = 1.0
@@ -217,6 +238,7 @@ class OffboardConfig:
     autopilot: str = "auto"
     hand_back_mode: str = "hold"
     brake_hand_back_s: float | None = None
+    takeover: str = "always"
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -235,6 +257,8 @@ class OffboardConfig:
             raise ConfigError(f"autopilot must be one of {', '.join(AUTOPILOT_CHOICES)}, got {self.autopilot!r}")
         if self.hand_back_mode not in HAND_BACK_MODES:
             raise ConfigError(f"hand_back_mode must be one of {', '.join(HAND_BACK_MODES)}, got {self.hand_back_mode!r}")
+        if self.takeover not in TAKEOVER_CHOICES:
+            raise ConfigError(f"takeover must be one of {', '.join(TAKEOVER_CHOICES)}, got {self.takeover!r}")
         if self.brake_hand_back_s is not None:
             set_("brake_hand_back_s", check.number("brake_hand_back_s", self.brake_hand_back_s, lo=0.0, hi=MAX_OFFBOARD_SECONDS))
         if self.hold_after_goal_s is not None:
@@ -340,6 +364,8 @@ class OffboardSequencer:
         self._actions: list[Action] = []
         self.events: list[Event] = []
         self._start_held: str | None = None  # why the sequence may not leave WAIT_AUTOPILOT yet
+        self._mission_started = False  # START_MISSION saw the mission mode (watch: started once a run)
+        self._mission_seen = False     # the vehicle was seen in its mission mode while watching
 
     # ------------------------------------------------------------------ state
 
@@ -372,6 +398,11 @@ class OffboardSequencer:
     def vehicle_mode(self) -> str | None:
         """The followed autopilot's mode in its latest HEARTBEAT (its own name for it), once heard."""
         return None if self._hb is None else (self._hb.mode or "unknown mode")
+
+    @property
+    def vehicle_in_mission(self) -> bool:
+        """Whether the followed autopilot's latest HEARTBEAT shows it armed in its mission mode."""
+        return self._hb is not None and self._hb.armed and self._hb.role is ModeRole.MISSION
 
     # ------------------------------------------------------------------ inputs
 
@@ -682,6 +713,22 @@ class OffboardSequencer:
                 self._transition(t_s, self._entry_phase(hb), f"vehicle disarmed before {self._mode(ModeRole.OFFBOARD)}")
             elif hb.offboard:
                 self._engage(t_s, f"{self._mode(ModeRole.OFFBOARD)} confirmed by HEARTBEAT")
+        elif phase is Phase.START_MISSION:
+            if hb.role is ModeRole.MISSION:
+                self._pending = None
+                self._mission_started = True
+                self._transition(t_s, Phase.WATCHING, f"mission started ({hb.mode}); watching, not commanding")
+            elif not hb.armed:
+                self._pending = None
+                self._transition(t_s, self._entry_phase(hb), "vehicle disarmed before its mission started")
+            elif self._pending is None:
+                self._send(t_s, messages.mission_start_command(**self._tgt()))
+        elif phase is Phase.WATCHING:
+            if hb.role is ModeRole.MISSION and hb.armed:
+                self._mission_seen = True
+            elif self._mission_seen and not hb.armed:
+                self._transition(t_s, Phase.WATCH_ENDED, f"vehicle disarmed in {hb.mode or 'unknown mode'} after its "
+                                 "mission; watch ended", mavlink2.MAV_SEVERITY_NOTICE)
         elif phase is Phase.HANDING_BACK:
             if not hb.offboard or not hb.armed:
                 self._pending = None
@@ -764,9 +811,13 @@ class OffboardSequencer:
             return Phase.WAIT_READY
         if hb.armed:
             return self._after_armed()
+        if self.config.takeover == "watch" and (self._mission_started or not self.config.arm):
+            return Phase.WATCHING
         return Phase.ARMING if self.config.arm else Phase.WAIT_ARMED
 
     def _after_armed(self) -> Phase:
+        if self.config.takeover == "watch":   # the autopilot takes off with its mission
+            return Phase.START_MISSION if self.config.arm and not self._mission_started else Phase.WATCHING
         if self.config.takeoff_alt_m is not None and not self._seen_takeoff_mode:
             return Phase.TAKEOFF
         return Phase.PRESTREAM
@@ -816,6 +867,8 @@ class OffboardSequencer:
             msg = messages.takeoff_command(self._takeoff_param7(), confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.REQUEST_OFFBOARD:
             msg = messages.set_mode_command(self._kind, ModeRole.OFFBOARD, armed, confirmation=pending.attempts, **self._tgt())
+        elif self._phase is Phase.START_MISSION:
+            msg = messages.mission_start_command(confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.HANDING_BACK:
             msg = messages.set_mode_command(self._kind, HAND_BACK_MODES[self.config.hand_back_mode], armed,
                                             confirmation=pending.attempts, **self._tgt())

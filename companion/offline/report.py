@@ -65,6 +65,9 @@ def companion_report(companion: Companion) -> dict:
     mission = getattr(companion.goal, "summary", None)   # a mission goal: the items reached
     if callable(mission):
         report.update(mission())
+    if getattr(companion, "watch", None) is not None:   # watching the autopilot's own mission
+        report["takeover"] = "watch"
+        report.update(companion.watch.summary())
     if getattr(companion, "goal_error", None):
         report["goal_error"] = companion.goal_error
     if getattr(companion, "fence", None) is not None:   # a geofence was flown: how far inside it the estimate kept

@@ -16,7 +16,9 @@ clock and installs no handler (``companion fly`` turns signals into :meth:`RunEn
 ====  ==================  ==========================================================
 code  outcome             meaning
 ====  ==================  ==========================================================
-0     goal reached        the goal was reached and the run ended without trouble
+0     goal reached        the goal was reached and the run ended without trouble;
+                          watching (``--takeover watch``): the vehicle flew its
+                          mission and disarmed
 1     error               the sequence gave up (arming, take-off or the mode refused,
                           or the planning process did not start)
 2     (bad input)         a bad flag, file or key; nothing was flown
@@ -47,7 +49,7 @@ from companion.loop.engagement import OffboardSequence
 from companion.mavlink.offboard import Phase
 
 #: Phases after which nothing more will happen without the operator.
-_OVER = frozenset({Phase.HELD, Phase.GAVE_UP})
+_OVER = frozenset({Phase.HELD, Phase.GAVE_UP, Phase.WATCH_ENDED})
 
 
 class Outcome(enum.Enum):
@@ -167,6 +169,8 @@ class RunEnd:
             return Outcome.STOPPED_NOT_HELD
         if self.requests:
             return Outcome.STOPPED
+        if phase is Phase.WATCH_ENDED:
+            return Outcome.GOAL_REACHED
         if companion.state.goal_reached_t_s is not None:
             return Outcome.GOAL_REACHED
         return Outcome.STOPPED

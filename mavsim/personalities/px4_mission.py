@@ -44,6 +44,8 @@ logger = logging.getLogger(__name__)
 __all__ = ["MissionFlight", "NO_MISSION", "ACTIVE", "COMPLETE"]
 
 NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF = 16, 17, 19, 20, 21, 22
+#: MAV_CMDs from here on are DO_ (and CONDITION_) items, not places to fly (NAV_ items are below 100)
+DO_COMMANDS_FROM = 100
 DO_CHANGE_SPEED = 178
 #: MISSION_CURRENT ``mission_state``: no mission, not started, active, paused, complete.
 NO_MISSION, NOT_STARTED, ACTIVE, COMPLETE = 1, 2, 3, 5
@@ -95,6 +97,9 @@ class MissionFlight:
             if self.state != ACTIVE:
                 break
             item = self.items[self.current]
+            if done is not None and item.command < DO_COMMANDS_FROM:
+                self.reached.append(done)   # a NAV item next: the item before is named first, in order
+                done = None
             v, finished = self._fly(item, now_s, p)
             if not finished:
                 if done is not None:

@@ -26,6 +26,7 @@ SOURCES = {
     "DEFAULT_URL": ("companion.mavlink.link", "DEFAULT_URL"),
     "FORMULATIONS": ("companion.core.planner.config", "FORMULATIONS"),
     "SOLVERS": ("companion.core.planner.config", "SOLVERS"),
+    "TAKEOVER_CHOICES": ("companion.mavlink.offboard", "TAKEOVER_CHOICES"),
     "METHODS": ("companion.offline.campaign.generate", "METHODS"),
     "FAMILIES": ("companion.offline.campaign.generate", "FAMILIES"),
     "VEHICLES": ("companion.offline.campaign.generate", "VEHICLES"),

@@ -167,3 +167,16 @@ def test_that_two_laps_are_flown_in_mavsim_and_the_mission_ends_as_it_says(tmp_p
     # the corner (8, 8) is passed twice, within its 1 m acceptance, on separate laps
     near = np.flatnonzero(np.linalg.norm(positions - corner, axis=1) < 1.0)
     assert near.size and (np.diff(near) > 10).sum() >= 1
+
+
+def test_that_the_route_the_autopilot_flies_from_an_item_follows_a_jump_once():
+    """What a watching companion predicts the autopilot flies (``MissionGoal.route_from``): from the
+    current item on, through a jump back once (the next lap), ending where the mission ends."""
+    patrol = _placed(plan_dict(SQUARE, final=None, extra_items=[_jump(2, -1)]))
+    np.testing.assert_allclose(patrol.route_from(3), [SQUARE[2], SQUARE[3], *SQUARE], atol=1e-6)
+    assert len(patrol.route_from(0)) == 8                     # a takeoff current: the first lap and the next
+    once = _placed(plan_dict(SQUARE))
+    np.testing.assert_allclose(once.route_from(2), SQUARE[1:], atol=1e-6)
+    assert once.route_from(5).shape == (0, 3)                 # the return: past the last waypoint
+    _visit(once, 100)
+    assert once.route_from(1).shape == (4, 3)                 # flying it does not change the route

@@ -34,7 +34,8 @@ def test_that_the_registry_knows_ardupilot_by_its_heartbeat():
 
 @pytest.mark.parametrize(("mode", "role"), [
     (CopterMode.GUIDED, ModeRole.OFFBOARD), (CopterMode.LOITER, ModeRole.HOLD), (CopterMode.BRAKE, ModeRole.HOLD),
-    (CopterMode.STABILIZE, ModeRole.OTHER), (CopterMode.RTL, ModeRole.OTHER), (CopterMode.AVOID_ADSB, ModeRole.OTHER),
+    (CopterMode.AUTO, ModeRole.MISSION), (CopterMode.STABILIZE, ModeRole.OTHER), (CopterMode.RTL, ModeRole.OTHER),
+    (CopterMode.AVOID_ADSB, ModeRole.OTHER),
     (99, ModeRole.OTHER)])
 def test_that_copter_modes_have_their_roles(mode, role):
     assert ARDUPILOT.mode_role(mode) is role

@@ -456,3 +456,41 @@ def test_that_invalid_config_is_refused(kwargs):
     (key,) = kwargs
     with pytest.raises(ConfigError, match=rf"^{key} = .* must be"):
         OffboardConfig(**kwargs)
+
+
+# ---------------------------------------------------------------- takeover "watch"
+
+def test_that_watching_with_arm_arms_starts_the_mission_once_and_never_streams():
+    def vehicle(s, msg):
+        if msg.command == 400:
+            s.armed = True
+        elif msg.command == 300:     # the first MISSION_START is lost; the retry takes
+            if any(m.command == 300 for _, m in s.sent[:-1]):
+                s.mode = px4.AUTO_MISSION
+
+    s = Script(OffboardConfig(arm=True, takeover="watch", autopilot_listen_s=0.0), mode=px4.AUTO_LOITER, armed=False)
+    state = s.run(6.0, vehicle)
+    assert state.phase is Phase.WATCHING and not state.streaming and not state.engaged
+    assert [m.command for _, m in s.sent] == [400, 300, 300]
+    assert s.seq.vehicle_in_mission
+    state = s.run(5.0, vehicle)                       # flying its mission: nothing more is sent
+    assert state.phase is Phase.WATCHING and len(s.sent) == 3
+    s.armed = False                                   # landed and disarmed at the mission's end
+    state = s.run(2.0, vehicle)
+    assert state.phase is Phase.WATCH_ENDED and len(s.sent) == 3
+
+
+def test_that_watching_without_arm_waits_for_the_operator_and_a_link_loss_starts_nothing():
+    s = Script(OffboardConfig(takeover="watch"), mode=px4.AUTO_LOITER, armed=False)
+    assert s.run(3.0).phase is Phase.WATCHING and s.sent == []
+    s.armed, s.mode = True, px4.AUTO_MISSION           # the operator starts the mission
+    assert s.run(3.0).phase is Phase.WATCHING and s.seq.vehicle_in_mission
+    s.heartbeats = False
+    assert s.run(4.0).phase is Phase.LINK_LOST
+    s.heartbeats, s.mode = True, px4.AUTO_LOITER        # back, the operator has paused the mission
+    assert s.run(2.0).phase is Phase.WATCHING and s.sent == []
+
+
+def test_that_a_takeover_other_than_always_or_watch_is_refused():
+    with pytest.raises(ConfigError, match="takeover must be one of always, watch"):
+        OffboardConfig(takeover="guard")

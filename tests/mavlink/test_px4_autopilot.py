@@ -103,7 +103,7 @@ def test_that_the_registry_knows_px4_by_its_heartbeat_and_nothing_else():
 @pytest.mark.parametrize(("mode", "role"), [
     (px4.OFFBOARD, ModeRole.OFFBOARD), (px4.AUTO_LOITER, ModeRole.HOLD), (px4.AUTO_TAKEOFF, ModeRole.TAKEOFF),
     (px4.POSCTL, ModeRole.POSITION), (px4.AUTO_RTL, ModeRole.OTHER), (px4.AUTO_LAND, ModeRole.OTHER),
-    (px4.encode_custom_mode(px4.MainMode.AUTO, px4.AutoSubMode.MISSION), ModeRole.OTHER),
+    (px4.encode_custom_mode(px4.MainMode.AUTO, px4.AutoSubMode.MISSION), ModeRole.MISSION), (px4.AUTO_MISSION, ModeRole.MISSION),
     (px4.encode_custom_mode(px4.MainMode.MANUAL), ModeRole.OTHER), (0, ModeRole.OTHER),
 ])
 def test_that_each_px4_mode_plays_its_role(mode, role):

@@ -86,9 +86,9 @@ STREAMS: tuple[tuple[int, float], ...] = (
 )
 
 _ROLES = {CopterMode.GUIDED: ModeRole.OFFBOARD, CopterMode.LOITER: ModeRole.HOLD, CopterMode.BRAKE: ModeRole.HOLD,
-          CopterMode.POSHOLD: ModeRole.POSITION}
+          CopterMode.POSHOLD: ModeRole.POSITION, CopterMode.AUTO: ModeRole.MISSION}
 _REQUESTS = {ModeRole.OFFBOARD: CopterMode.GUIDED, ModeRole.HOLD: CopterMode.LOITER, ModeRole.BRAKE: CopterMode.BRAKE,
-             ModeRole.POSITION: CopterMode.POSHOLD}
+             ModeRole.POSITION: CopterMode.POSHOLD, ModeRole.MISSION: CopterMode.AUTO}
 
 
 def mode_name(custom_mode: int) -> str:

@@ -40,7 +40,8 @@ class ModeRole(enum.Enum):
     BRAKE = "brake"              # the autopilot stops at once and then holds (a hand-back choice)
     TAKEOFF = "takeoff"          # the autopilot's own take-off
     POSITION = "position"        # a pilot flies with position assistance
-    OTHER = "other"              # anything else (manual, mission, return, land, unknown)
+    MISSION = "mission"          # the autopilot flies its stored mission (PX4 AUTO.MISSION, ArduCopter AUTO)
+    OTHER = "other"              # anything else (manual, return, land, unknown)
 
 
 @dataclass(frozen=True)

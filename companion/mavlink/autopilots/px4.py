@@ -166,11 +166,14 @@ AUTO_TAKEOFF = encode_custom_mode(MainMode.AUTO, AutoSubMode.TAKEOFF)
 AUTO_LOITER = encode_custom_mode(MainMode.AUTO, AutoSubMode.LOITER)
 AUTO_LAND = encode_custom_mode(MainMode.AUTO, AutoSubMode.LAND)
 AUTO_RTL = encode_custom_mode(MainMode.AUTO, AutoSubMode.RTL)
+AUTO_MISSION = encode_custom_mode(MainMode.AUTO, AutoSubMode.MISSION)
 
 
-_ROLES = {OFFBOARD: ModeRole.OFFBOARD, AUTO_LOITER: ModeRole.HOLD, AUTO_TAKEOFF: ModeRole.TAKEOFF, POSCTL: ModeRole.POSITION}
+_ROLES = {OFFBOARD: ModeRole.OFFBOARD, AUTO_LOITER: ModeRole.HOLD, AUTO_TAKEOFF: ModeRole.TAKEOFF, POSCTL: ModeRole.POSITION,
+          AUTO_MISSION: ModeRole.MISSION}
 #: PX4's Hold stops the vehicle and holds: it is also the hand-back for BRAKE.
-_REQUESTS = {ModeRole.OFFBOARD: OFFBOARD, ModeRole.HOLD: AUTO_LOITER, ModeRole.BRAKE: AUTO_LOITER, ModeRole.POSITION: POSCTL}
+_REQUESTS = {ModeRole.OFFBOARD: OFFBOARD, ModeRole.HOLD: AUTO_LOITER, ModeRole.BRAKE: AUTO_LOITER, ModeRole.POSITION: POSCTL,
+             ModeRole.MISSION: AUTO_MISSION}
 
 
 class Px4Autopilot:
