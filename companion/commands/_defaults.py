@@ -15,7 +15,7 @@ FORMULATIONS: tuple[str, ...] = ("hyperplane", "paper", "deterministic", "bhatta
 #: companion.core.planner.config.SOLVERS
 SOLVERS: tuple[str, ...] = ("osqp", "piqp")
 #: companion.mavlink.offboard.TAKEOVER_CHOICES
-TAKEOVER_CHOICES = ("always", "watch")
+TAKEOVER_CHOICES = ("always", "watch", "guard")
 #: companion.offline.campaign.generate.METHODS
 METHODS = ("hyperplane", "paper", "deterministic", "bhattacharyya")
 #: companion.offline.campaign.generate.FAMILIES

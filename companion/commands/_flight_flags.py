@@ -41,10 +41,19 @@ def planner_overrides(args: argparse.Namespace) -> dict:
     return overrides
 
 
-def offboard_settings(scenario_offboard, args: argparse.Namespace):
-    """The scenario's ``[offboard]`` with the flags applied (a flag wins over the file)."""
+def offboard_settings(scenario_offboard, args: argparse.Namespace, mission=None):
+    """The scenario's ``[offboard]`` with the flags applied (a flag wins over the file); with the
+    scenario's ``[mission]`` (``mission``), a takeover that needs a mission is refused without one."""
     if args.goal is not None and args.mission is not None:
         raise ConfigError("--goal and --mission: give one of them")
+    takeover = scenario_offboard.takeover if getattr(args, "takeover", None) is None else args.takeover
+    if takeover != "always" and mission is not None and args.mission is None and mission.plan_file is None:
+        raise ConfigError(f"--takeover {takeover} needs a mission to watch: --mission FILE|vehicle, or [mission] plan_file")
+    if takeover != "always":
+        for flag, value in (("--exit-after-goal", args.exit_after_goal), ("--takeoff-alt", args.takeoff_alt)):
+            if value is not None:
+                raise ConfigError(f"{flag} does not go with --takeover {takeover}: the autopilot's mission takes off "
+                                  "and ends the flight")
     return dataclasses.replace(
         scenario_offboard,
         arm=args.arm or scenario_offboard.arm,
@@ -53,7 +62,7 @@ def offboard_settings(scenario_offboard, args: argparse.Namespace):
         hold_after_goal_s=args.exit_after_goal,
         target_system=scenario_offboard.target_system if args.target_system is None else args.target_system,
         autopilot=scenario_offboard.autopilot if args.autopilot is None else args.autopilot,
-        takeover=scenario_offboard.takeover if getattr(args, "takeover", None) is None else args.takeover,
+        takeover=takeover,
     )
 
 

@@ -104,7 +104,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--takeover", choices=TAKEOVER_CHOICES, default=None,
                    help="always: fly the whole flight in OFFBOARD (GUIDED); watch: never command, let the autopilot fly "
                         "its mission (started with --arm, else by the operator) and warn of predicted conflicts on its "
-                        "path (needs --mission; docs/MISSIONS.md) (default: the scenario's [offboard] takeover, else always)")
+                        "path; guard: as watch, and take over in OFFBOARD on a predicted conflict, fly round it and give "
+                        "the vehicle back to its mission once the path is clear (watch and guard need --mission; "
+                        "docs/MISSIONS.md) (default: the scenario's [offboard] takeover, else always)")
     p.add_argument("--formulation", default=None, choices=FORMULATIONS, help="planner formulation (overrides the scenario)")
     p.add_argument("--no-c-max", action="store_true", help="drop the scenario's c_max upper bound")
     p.add_argument("--tlog", type=output_file, default=None, help="record the link to this tlog")
@@ -159,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
     from companion.offline.scenario_file import load_both
 
     scenario, _ = load_both(args.scenario, **planner_overrides(args))  # mavsim's sections too: never accept what mavsim rejects
-    offboard = offboard_settings(scenario.offboard, args)
+    offboard = offboard_settings(scenario.offboard, args, scenario.mission)
     try:
         signing_key = load_signing_key(args.signing_key_file, args.signing_key_env)
     except SigningKeyError as exc:
@@ -234,10 +236,10 @@ def run(args: argparse.Namespace) -> int:
     for key in ("mission_items_reached_t_s", "autopilot_items_reached_t_s"):
         if key in report:
             report[key] = [round(t - started, 2) for t in report[key]]
-    for conflict in report.get("watch_conflicts", []):
-        for key in ("start_s", "end_s"):
-            if conflict[key] is not None:
-                conflict[key] = round(conflict[key] - started, 2)
+    for row in (*report.get("watch_conflicts", []), *report.get("takeovers", [])):
+        for key in ("start_s", "end_s", "offboard_s"):
+            if row.get(key) is not None:
+                row[key] = round(row[key] - started, 2)
     if stats is not None:
         report.update(stats.summary())
         report["wall_s"] = round(stats.wall_s, 2)

@@ -24,7 +24,9 @@ Every edge (lockstep, real time, replay) makes those calls through one
 - :class:`~companion.loop.commanding.Commanding`: the loop's mode and each tick's command and setpoint;
 - :class:`~companion.loop.goal_stage.GoalStage`: placing the goal before flying, a mission's messages;
 - :class:`~companion.loop.mission_watch.MissionWatch`: the autopilot's own mission flight, its path
-  predicted and judged, when the companion only watches (``[offboard] takeover = "watch"``);
+  predicted and judged (``[offboard] takeover = "watch"`` or ``"guard"``);
+- :class:`~companion.loop.mission_guard.MissionGuard`: takeovers on a predicted conflict and
+  hand-backs to the mission (``[offboard] takeover = "guard"``);
 - an injected :class:`~companion.loop.engagement.OffboardSequence` (arm, take-off, engage, hand back);
 - :class:`~companion.loop.supervisor.Supervisor`: HEARTBEAT, TIMESYNC, announcements.
 """
@@ -50,6 +52,7 @@ from companion.loop.obstacle_sources import ObstacleSource
 from companion.loop.intake.obstacles import ObstacleIntake
 from companion.loop.mission_file import read_mission_file
 from companion.loop.mission_goal import MissionGoal
+from companion.loop.mission_guard import MissionGuard
 from companion.loop.mission_watch import MissionProgress, MissionWatch
 from companion.loop.perception import Perception
 from companion.loop.plan_cycle import PlanArrival, PlanCycle
@@ -65,7 +68,7 @@ from companion.loop.vehicle_reference import VehicleReference
 from companion.mavlink import messages
 from companion.mavlink.link import Received
 from companion.errors import ConfigError
-from companion.mavlink.offboard import Notify, OffboardConfig, OffboardSequencer, Phase, SendCommand
+from companion.mavlink.offboard import MISSION_TAKEOVERS, Notify, OffboardConfig, OffboardSequencer, Phase, SendCommand
 
 logger = logging.getLogger(__name__)
 
@@ -167,14 +170,20 @@ class Companion:
         #: hand-backs requested from outside the loop, as (link time s, reason), in order
         self.hand_backs: list[tuple[float, str]] = []
         self.goal_stage = GoalStage(self.builder.goal, self.sequencer, self.supervisor, fence=self.fence)
-        #: the autopilot's own mission flight watched (``[offboard] takeover = "watch"``), else None
+        #: the autopilot's own mission flight watched (``[offboard] takeover = "watch"`` or ``"guard"``), else None
         self.watch: MissionWatch | None = None
-        if getattr(getattr(self.sequencer, "config", None), "takeover", "always") == "watch":
+        #: takeovers on predicted conflicts (``[offboard] takeover = "guard"``), else None
+        self.guard: MissionGuard | None = None
+        takeover = getattr(getattr(self.sequencer, "config", None), "takeover", "always")
+        if takeover in MISSION_TAKEOVERS:
             if not callable(getattr(self.builder.goal, "route_from", None)):
-                raise ConfigError("takeover \"watch\" needs a mission to watch: [mission] plan_file, or "
+                raise ConfigError(f"takeover \"{takeover}\" needs a mission to watch: [mission] plan_file, or "
                                   "companion fly --mission FILE|vehicle")
             self.watch = MissionWatch(scenario.planner, self.settings, scenario.mission, builder=self.builder,
                                       supervisor=self.supervisor, progress=self.progress)
+        if takeover == "guard":
+            self.guard = MissionGuard(self.watch, self.sequencer, self.builder.goal, self.cycle, self.supervisor)
+            self.commanding.mirror = True   # guarding: the stream carries the vehicle's own velocity
 
     @property
     def goal_error(self) -> str | None:
@@ -263,6 +272,8 @@ class Companion:
         self.cycle.begin_tick()
         out: Outbox = self.supervisor.heartbeat(t_s)
         out.extend(self.goal_stage.before_sequence(t_s, self.autopilot))
+        if self.guard is not None:   # a takeover or a hand-back asked now goes out with this tick's actions
+            out.extend(self.guard.step(t_s, self.perception))
         for action in self.sequencer.step(t_s):
             if isinstance(action, SendCommand):
                 out.append(action.msg)

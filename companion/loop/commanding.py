@@ -37,6 +37,9 @@ class Commanding:
         self._braking_since: float | None = None  # link time the current braking (stale estimate, no plan) began
         self._reset_epoch = 0  # the perception's estimator reset epoch last acted on
         self.position_quality = PositionQuality(settings.position_sd_warn_m)
+        #: not engaged, stream the vehicle's own estimated velocity rather than a hover (a guarding
+        #: companion: should OFFBOARD be entered before a plan, the vehicle goes on, braking from there)
+        self.mirror = False
 
     def released(self, t_s: float) -> Outbox:
         """Not streaming (nothing of ours in force): hold the executor, restart the response
@@ -53,7 +56,11 @@ class Commanding:
         if not engaged:
             self._reset_epoch = self.perception.reset_epoch  # hovering: no plan in force to drop
             self.state.mode = LoopMode.PRESTREAM
-            command = self.executor.hold()  # hover while the autopilot is asked to switch
+            est = self.perception.drone.state
+            if self.mirror and est is not None:
+                command = self.executor.mirror(est.velocity)
+            else:
+                command = self.executor.hold()  # hover while the autopilot is asked to switch
             return command, self.cycle.collect(t_s, apply=False)
         return self._engaged(t_s)
 

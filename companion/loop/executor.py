@@ -93,6 +93,12 @@ class Executor:
         self.command = np.zeros(3)
         return self.command
 
+    def mirror(self, velocity: np.ndarray) -> np.ndarray:
+        """The vehicle's own velocity (NED m/s) as the command (streamed while the autopilot flies);
+        returns the command."""
+        self.command = np.array(velocity, dtype=float).reshape(3)
+        return self.command
+
     def brake(self) -> np.ndarray:
         """Velocity one setpoint period closer to zero, within the braking bound; returns the command."""
         self.command = np.sign(self.command) * np.maximum(np.abs(self.command) - self._brake_step, 0.0)

@@ -187,6 +187,30 @@ class MissionGoal:
                 return jump.to
         return index + 1 if index + 1 < len(self.waypoints) else None
 
+    @property
+    def current_seq(self) -> int | None:
+        """The item the companion flies to (a waypoint's seq), or, once the last waypoint is reached,
+        the item after it (a landing, a return; None when there is none)."""
+        if not self.waypoints:
+            return None
+        seq = self.waypoints[self.index].seq
+        if not self.finished:
+            return seq
+        return next((it.seq for it in (self.items or ())[seq + 1:] if it.command != mavlink2.MAV_CMD_DO_JUMP), None)
+
+    def resume_at(self, seq: int) -> bool:
+        """Fly on from the autopilot's item ``seq`` (a guard's takeover: the autopilot flew the mission
+        so far): the first waypoint at or after it becomes the one flown to, its leg starting where
+        the vehicle is; the autopilot is not told (it is at that item). False when no waypoint is left."""
+        index = next((k for k, w in enumerate(self.waypoints) if w.seq >= seq), None)
+        if index is None:
+            return False
+        self._go_to(index)
+        self.finished = False
+        self.route_start = None       # the leg starts where the takeover finds the vehicle
+        self._current_sent = True     # the autopilot's current item is already this one
+        return True
+
     def route_from(self, current_seq: int) -> np.ndarray:
         """The waypoints the autopilot flies from its current item ``current_seq`` on (NED m, (K, 3)), as
         it flies them: the first waypoint at or after that item, then the next ones, a DO_JUMP with

@@ -124,14 +124,20 @@ class MissionWatch:
         self.conflict_count = 0
         self._open: Conflict | None = None
 
-    def step(self, t_s: float, perception: Perception, flying_mission: bool) -> Outbox:
-        """At link time ``t_s``: judge the autopilot's path when due (every replan period while
-        ``flying_mission``, with a fresh estimate and the mission's route known)."""
-        if not flying_mission or not self._period.ready(t_s):
+    @property
+    def open(self) -> Conflict | None:
+        """The conflict predicted at the latest evaluation (None: the path was clear)."""
+        return self._open
+
+    def step(self, t_s: float, perception: Perception, active: bool, from_seq: int | None = None) -> Outbox:
+        """At link time ``t_s``: judge the mission path when due (every replan period while
+        ``active``, with a fresh estimate and the mission's route known): the path the autopilot
+        flies from item ``from_seq`` on (default: its current item, MISSION_CURRENT)."""
+        if not active or not self._period.ready(t_s):
             return []
         t_v = perception.vehicle_time(t_s)
         est = perception.drone.state
-        route = self._route()
+        route = self._route(self.progress.current_seq if from_seq is None else from_seq)
         if t_v is None or est is None or t_v - est.t_s > self.settings.estimate_timeout_s or route is None:
             return []
         self._period.take(t_s)
@@ -162,12 +168,12 @@ class MissionWatch:
             out.append(self.supervisor.say(t_s, SEV_NOTICE, "companion: mission path clear"))
         return out
 
-    def _route(self) -> np.ndarray | None:
-        """The mission's remaining waypoints from the autopilot's current item (NED m), or None."""
+    def _route(self, from_seq: int | None) -> np.ndarray | None:
+        """The mission's remaining waypoints from item ``from_seq`` (NED m), or None."""
         route_from = getattr(self.builder.goal, "route_from", None)
-        if route_from is None or self.progress.current_seq is None:
+        if route_from is None or from_seq is None:
             return None
-        return route_from(self.progress.current_seq)
+        return route_from(from_seq)
 
     def _contours(self, perception: Perception, t_v: float, position: np.ndarray,
                   path: np.ndarray) -> tuple[np.ndarray, list[str]]:

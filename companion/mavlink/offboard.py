@@ -31,6 +31,20 @@ START_MISSION (only with ``arm``, once a run) sends MAV_CMD_MISSION_START until 
 shows the mission mode (retried as any command); without ``arm`` the operator arms and starts
 the mission. Nothing is streamed while watching.
 
+With ``takeover = "guard"`` the start is the same, and the loop may take the vehicle over
+(:meth:`OffboardSequencer.take_over`, on a predicted conflict) and give it back to its mission
+(:meth:`OffboardSequencer.resume_mission`, once its path is clear); setpoints stream all the
+while, so OFFBOARD can be entered at once::
+
+    WAIT_AUTOPILOT -> [ARMING -> START_MISSION] -> GUARDING --take_over()--> TAKING_OVER
+        -> ENGAGED --resume_mission()--> RESUMING_MISSION -> GUARDING ...
+        GUARDING --disarmed after its mission--> WATCH_ENDED
+
+A takeover the autopilot does not confirm after the retries goes back to GUARDING (the loop
+may ask again); a resumption it does not confirm goes back to ENGAGED. The companion commands
+(``state.engaged``) from the takeover's request on: the plan's setpoints are already in force
+when the vehicle enters OFFBOARD.
+
 What differs between autopilots is the autopilot's
 :class:`~companion.mavlink.autopilots.base.EngagementPlan`, never a branch on its name. ArduPilot's
 (ArduCopter) adds WAIT_READY (nothing is commanded until its estimator status says it can fly,
@@ -106,6 +120,9 @@ class Phase(enum.Enum):
     REQUEST_OFFBOARD = "REQUEST_OFFBOARD"
     START_MISSION = "START_MISSION"
     WATCHING = "WATCHING"
+    GUARDING = "GUARDING"
+    TAKING_OVER = "TAKING_OVER"
+    RESUMING_MISSION = "RESUMING_MISSION"
     WATCH_ENDED = "WATCH_ENDED"
     ENGAGED = "ENGAGED"
     HANDING_BACK = "HANDING_BACK"
@@ -115,7 +132,10 @@ class Phase(enum.Enum):
     GAVE_UP = "GAVE_UP"
 
 
-_STREAMING = frozenset({Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED, Phase.HANDING_BACK})
+_STREAMING = frozenset({Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED, Phase.HANDING_BACK, Phase.GUARDING,
+                        Phase.TAKING_OVER, Phase.RESUMING_MISSION})
+#: Phases in which the companion's setpoints are flown (or will be, the moment the vehicle enters OFFBOARD).
+_COMMANDING = frozenset({Phase.ENGAGED, Phase.TAKING_OVER, Phase.RESUMING_MISSION})
 #: Phases in which nothing more happens (no heartbeat watch, no commands).
 _FINAL = frozenset({Phase.LINK_LOST, Phase.GAVE_UP, Phase.PILOT_TOOK_OVER, Phase.HELD, Phase.WATCH_ENDED})
 
@@ -128,8 +148,11 @@ MAX_OFFBOARD_SECONDS = 86_400.0
 HAND_BACK_MODES = {"hold": ModeRole.HOLD, "brake": ModeRole.BRAKE}
 
 #: ``takeover`` values: ``"always"`` flies the whole flight in the offboard mode; ``"watch"`` never
-#: commands: the autopilot flies its own mission and the companion warns of predicted conflicts.
-TAKEOVER_CHOICES = ("always", "watch")
+#: commands: the autopilot flies its own mission and the companion warns of predicted conflicts;
+#: ``"guard"``: as watch, and the companion takes over on a predicted conflict and gives back.
+TAKEOVER_CHOICES = ("always", "watch", "guard")
+#: ``takeover`` values in which the autopilot flies its own mission
+MISSION_TAKEOVERS = ("watch", "guard")
 
 #: A takeoff that ends by height (:attr:`EngagementPlan.takeoff_ends_by_height`) is complete when
 #: the vehicle's estimate is within this of the height asked (m) and climbs slower than
@@ -219,7 +242,9 @@ class OffboardConfig:
         ``"always"`` (default): the companion flies the vehicle in the offboard mode.
         ``"watch"``: it never commands; the autopilot flies its stored mission (started by the
         companion with ``arm``, else by the operator) and the companion follows it and warns of
-        predicted conflicts (WATCHING; ``companion fly --takeover watch``).
+        predicted conflicts (WATCHING; ``companion fly --takeover watch``). ``"guard"``: as
+        watch, streaming all the while; on a predicted conflict the loop takes the vehicle over
+        in OFFBOARD and gives it back to its mission once the path is clear (GUARDING).
     """
 
     prestream_s: float = 1.0
@@ -366,6 +391,8 @@ class OffboardSequencer:
         self._start_held: str | None = None  # why the sequence may not leave WAIT_AUTOPILOT yet
         self._mission_started = False  # START_MISSION saw the mission mode (watch: started once a run)
         self._mission_seen = False     # the vehicle was seen in its mission mode while watching
+        #: link times of the last takeover: (requested, confirmed by HEARTBEAT or None)
+        self.takeover_times: tuple[float, float | None] | None = None
 
     # ------------------------------------------------------------------ state
 
@@ -378,7 +405,7 @@ class OffboardSequencer:
         return SequencerState(
             phase=self._phase,
             streaming=self._phase in _STREAMING,
-            engaged=self._phase is Phase.ENGAGED,
+            engaged=self._phase in _COMMANDING,
             since_s=self._since,
             attempts=self._pending.attempts if self._pending else 0,
             reason=self._reason,
@@ -545,7 +572,8 @@ class OffboardSequencer:
         streaming to); elsewhere nothing is streaming and nothing is done. Returns
         whether the hand-back started.
         """
-        if self._phase not in (Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED):
+        if self._phase not in (Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED, Phase.TAKING_OVER,
+                               Phase.RESUMING_MISSION):
             return False
         self._pending = None
         self._hand_back_asked = True
@@ -555,6 +583,29 @@ class OffboardSequencer:
         if self._target is not None:
             self._send(t_s, messages.set_mode_command(self._kind, role, bool(self._hb and self._hb.armed), **self._tgt()))
         self._advance(t_s)
+        return True
+
+    def take_over(self, t_s: float, reason: str) -> bool:
+        """Guarding (``takeover = "guard"``), take the vehicle over: request OFFBOARD at link time ``t_s``
+        (the stream runs already) and command from now on; whether it started (only from GUARDING,
+        the vehicle armed in its mission mode)."""
+        if self._phase is not Phase.GUARDING or not self.vehicle_in_mission:
+            return False
+        self.takeover_times = (t_s, None)
+        self._transition(t_s, Phase.TAKING_OVER, f"{reason}; requesting {self._mode(ModeRole.OFFBOARD)}",
+                         mavlink2.MAV_SEVERITY_WARNING)
+        self._send(t_s, messages.set_mode_command(self._kind, ModeRole.OFFBOARD, True, **self._tgt()))
+        return True
+
+    def resume_mission(self, t_s: float, reason: str) -> bool:
+        """Taken over while guarding, give the vehicle back to its mission (the mission mode requested
+        at link time ``t_s``, streaming until the HEARTBEAT shows it); whether it started (only from
+        ENGAGED in ``takeover = "guard"``; the loop has made the mission's current item the one to go on with)."""
+        if self._phase is not Phase.ENGAGED or self.config.takeover != "guard":
+            return False
+        self._transition(t_s, Phase.RESUMING_MISSION, f"{reason}; requesting {self._mode(ModeRole.MISSION)}",
+                         mavlink2.MAV_SEVERITY_NOTICE)
+        self._send(t_s, messages.set_mode_command(self._kind, ModeRole.MISSION, True, **self._tgt()))
         return True
 
     def _request_streams(self, t_s: float) -> None:
@@ -655,6 +706,8 @@ class OffboardSequencer:
                                      mavlink2.MAV_SEVERITY_NOTICE)
                 elif hb.offboard and hb.armed:
                     self._transition(t_s, Phase.ENGAGED, f"link back; vehicle still in {self._mode(ModeRole.OFFBOARD)}, resuming")
+                elif self.config.takeover == "guard" and hb.role is ModeRole.MISSION and hb.armed:
+                    self._transition(t_s, Phase.GUARDING, f"link back; vehicle in {hb.mode}, guarding")
                 else:
                     self._left_offboard(t_s, f"link back; vehicle left {self._mode(ModeRole.OFFBOARD)} for {hb.mode}")
             else:
@@ -717,18 +770,34 @@ class OffboardSequencer:
             if hb.role is ModeRole.MISSION:
                 self._pending = None
                 self._mission_started = True
-                self._transition(t_s, Phase.WATCHING, f"mission started ({hb.mode}); watching, not commanding")
+                self._transition(t_s, self._watching, f"mission started ({hb.mode}); "
+                                 + ("guarding" if self._watching is Phase.GUARDING else "watching, not commanding"))
             elif not hb.armed:
                 self._pending = None
                 self._transition(t_s, self._entry_phase(hb), "vehicle disarmed before its mission started")
             elif self._pending is None:
                 self._send(t_s, messages.mission_start_command(**self._tgt()))
-        elif phase is Phase.WATCHING:
+        elif phase in (Phase.WATCHING, Phase.GUARDING):
             if hb.role is ModeRole.MISSION and hb.armed:
                 self._mission_seen = True
             elif self._mission_seen and not hb.armed:
                 self._transition(t_s, Phase.WATCH_ENDED, f"vehicle disarmed in {hb.mode or 'unknown mode'} after its "
                                  "mission; watch ended", mavlink2.MAV_SEVERITY_NOTICE)
+        elif phase is Phase.TAKING_OVER:
+            if hb.offboard and hb.armed:
+                self.takeover_times = (self.takeover_times[0] if self.takeover_times else t_s, t_s)
+                self._engage(t_s, f"{self._mode(ModeRole.OFFBOARD)} confirmed by HEARTBEAT; taken over")
+            elif not hb.armed or hb.role is not ModeRole.MISSION:
+                self._pending = None
+                self._transition(t_s, Phase.GUARDING, f"vehicle in {hb.mode or 'unknown mode'}"
+                                 + ("" if hb.armed else ", disarmed") + "; takeover dropped", mavlink2.MAV_SEVERITY_WARNING)
+        elif phase is Phase.RESUMING_MISSION:
+            if hb.role is ModeRole.MISSION and hb.armed:
+                self._pending = None
+                self._transition(t_s, Phase.GUARDING, f"vehicle back in {hb.mode}; guarding", mavlink2.MAV_SEVERITY_NOTICE)
+            elif not hb.offboard or not hb.armed:
+                self._left_offboard(t_s, f"vehicle left {self._mode(ModeRole.OFFBOARD)} for {hb.mode}"
+                                    if hb.armed else "vehicle disarmed")
         elif phase is Phase.HANDING_BACK:
             if not hb.offboard or not hb.armed:
                 self._pending = None
@@ -811,13 +880,18 @@ class OffboardSequencer:
             return Phase.WAIT_READY
         if hb.armed:
             return self._after_armed()
-        if self.config.takeover == "watch" and (self._mission_started or not self.config.arm):
-            return Phase.WATCHING
+        if self.config.takeover in MISSION_TAKEOVERS and (self._mission_started or not self.config.arm):
+            return self._watching
         return Phase.ARMING if self.config.arm else Phase.WAIT_ARMED
 
+    @property
+    def _watching(self) -> Phase:
+        """Where a mission-flying takeover waits: WATCHING, or GUARDING (streaming)."""
+        return Phase.GUARDING if self.config.takeover == "guard" else Phase.WATCHING
+
     def _after_armed(self) -> Phase:
-        if self.config.takeover == "watch":   # the autopilot takes off with its mission
-            return Phase.START_MISSION if self.config.arm and not self._mission_started else Phase.WATCHING
+        if self.config.takeover in MISSION_TAKEOVERS:   # the autopilot takes off with its mission
+            return Phase.START_MISSION if self.config.arm and not self._mission_started else self._watching
         if self.config.takeoff_alt_m is not None and not self._seen_takeoff_mode:
             return Phase.TAKEOFF
         return Phase.PRESTREAM
@@ -852,6 +926,12 @@ class OffboardSequencer:
         if self._phase is Phase.TAKEOFF and pending.command == mavlink2.MAV_CMD_NAV_TAKEOFF:
             if self._seen_takeoff_mode or mavlink2.MAV_RESULT_ACCEPTED in pending.acks:
                 return  # accepted or climbing; the takeoff timeout decides
+        if pending.attempts > cfg.max_retries and self._phase in (Phase.TAKING_OVER, Phase.RESUMING_MISSION):
+            self._pending = None
+            back = Phase.GUARDING if self._phase is Phase.TAKING_OVER else Phase.ENGAGED
+            self._transition(t_s, back, f"{self._phase.value}: no confirmation after {pending.attempts} attempts",
+                             mavlink2.MAV_SEVERITY_WARNING)
+            return
         if pending.attempts > cfg.max_retries:
             self._pending = None
             self._transition(t_s, Phase.GAVE_UP,
@@ -865,8 +945,10 @@ class OffboardSequencer:
             msg = messages.arm_command(True, confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.TAKEOFF:
             msg = messages.takeoff_command(self._takeoff_param7(), confirmation=pending.attempts, **self._tgt())
-        elif self._phase is Phase.REQUEST_OFFBOARD:
+        elif self._phase in (Phase.REQUEST_OFFBOARD, Phase.TAKING_OVER):
             msg = messages.set_mode_command(self._kind, ModeRole.OFFBOARD, armed, confirmation=pending.attempts, **self._tgt())
+        elif self._phase is Phase.RESUMING_MISSION:
+            msg = messages.set_mode_command(self._kind, ModeRole.MISSION, armed, confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.START_MISSION:
             msg = messages.mission_start_command(confirmation=pending.attempts, **self._tgt())
         elif self._phase is Phase.HANDING_BACK:

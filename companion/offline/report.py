@@ -65,9 +65,11 @@ def companion_report(companion: Companion) -> dict:
     mission = getattr(companion.goal, "summary", None)   # a mission goal: the items reached
     if callable(mission):
         report.update(mission())
-    if getattr(companion, "watch", None) is not None:   # watching the autopilot's own mission
-        report["takeover"] = "watch"
+    if getattr(companion, "watch", None) is not None:   # watching (or guarding) the autopilot's own mission
+        report["takeover"] = "guard" if getattr(companion, "guard", None) is not None else "watch"
         report.update(companion.watch.summary())
+    if getattr(companion, "guard", None) is not None:
+        report.update(companion.guard.summary())
     if getattr(companion, "goal_error", None):
         report["goal_error"] = companion.goal_error
     if getattr(companion, "fence", None) is not None:   # a geofence was flown: how far inside it the estimate kept

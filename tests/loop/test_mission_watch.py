@@ -3,7 +3,6 @@ starts it, follows it, warns of the conflicts on its path ahead of time, and nev
 
 from __future__ import annotations
 
-import json
 import tomllib
 from pathlib import Path
 
@@ -18,26 +17,27 @@ from companion.loop.mission_watch import MissionProgress
 from companion.mavlink import messages
 from companion.mavlink.offboard import Phase
 from companion.offline.harness import run_lockstep
-from tests.support.missions import plan_text
+from tests.support.missions import crossing_plan_text
 
 ROOT = Path(__file__).resolve().parents[2]
-#: DO_CHANGE_SPEED to 1.5 m/s: the mission meets the antipodal obstacles at the circle's centre
-SLOW = {"type": "SimpleItem", "command": 178, "frame": 2, "autoContinue": True, "params": [1, 1.5, -1, 0, 0, 0, 0]}
+#: the missions are flown at 1.5 m/s (DO_CHANGE_SPEED): one through the circle's centre meets the obstacles there
 
 
-def _scenario(plan_path: Path, duration_s: float = 30.0) -> dict:
+def _scenario(plan_path: Path, duration_s: float = 30.0, takeover: str = "watch") -> dict:
+    """The antipodal encounter (its obstacles) with the mission of ``plan_path`` flown by the autopilot."""
     data = tomllib.loads((ROOT / "configs" / "antipodal.toml").read_text())
     data["scenario"]["duration_s"] = duration_s
     data["mission"] = {"goal_tolerance_m": 0.3, "plan_file": str(plan_path), "autopilot_speed_mps": 1.5}
-    data["offboard"] = {"arm": True, "takeover": "watch"}
+    data["offboard"] = {"arm": True, "takeover": takeover}
     return data
 
 
-def _fly(tmp_path: Path, waypoints, duration_s: float = 30.0, final: int = 20):
+def fly_mission(tmp_path: Path, waypoints, duration_s: float = 30.0, final: int = 20, takeover: str = "watch"):
+    """Fly the crossing mission through ``waypoints`` in lockstep; the run and the messages sent to the vehicle."""
     plan = tmp_path / "m.plan"
-    plan.write_text(_slow_plan(waypoints, final))
+    plan.write_text(crossing_plan_text(waypoints, final=final))
     sent = []
-    run = run_lockstep(_scenario(plan, duration_s), seed=0, stop_after_goal_s=None, tlog_path=None,
+    run = run_lockstep(_scenario(plan, duration_s, takeover), seed=0, stop_after_goal_s=None, tlog_path=None,
                        drop=lambda t, d, p: sent.append((t, d, p)) and False)
     mav = mavlink2.MAVLink(None)
     mav.robust_parsing = True
@@ -45,23 +45,10 @@ def _fly(tmp_path: Path, waypoints, duration_s: float = 30.0, final: int = 20):
     return run, to_vehicle
 
 
-def _slow_plan(waypoints, final: int) -> str:
-    """Take-off, DO_CHANGE_SPEED 1.5 m/s, the waypoints, then ``final`` (20 return, 21 land)."""
-    data = json.loads(plan_text(waypoints, final=final))
-    items = data["mission"]["items"]
-    items.insert(1, dict(SLOW, doJumpId=99))
-    if final == 21:   # land where the last waypoint is (a LAND at latitude 0 would fly there)
-        items[-1]["params"][4:6] = items[-2]["params"][4:6]
-        items[-1]["frame"] = 3
-    for k, item in enumerate(items):
-        item["doJumpId"] = k + 1
-    return json.dumps(data)
-
-
 @pytest.fixture(scope="module")
 def through(tmp_path_factory):
     """The mission straight through the antipodal encounter (24 m north of the start, 5 m up)."""
-    return _fly(tmp_path_factory.mktemp("w"), [(24.0, 0.0, -5.0)])
+    return fly_mission(tmp_path_factory.mktemp("w"), [(24.0, 0.0, -5.0)])
 
 
 def test_that_the_companion_starts_the_mission_and_never_commands(through):
@@ -120,7 +107,7 @@ def test_that_repeated_reached_items_count_once_and_a_lap_counts_again():
 
 def test_that_a_clear_mission_raises_no_conflict(tmp_path):
     """The same mission 20 m west of the encounter: judged all along, never in conflict."""
-    run, to_vehicle = _fly(tmp_path, [(0.0, -20.0, -5.0)], duration_s=20.0)
+    run, to_vehicle = fly_mission(tmp_path, [(0.0, -20.0, -5.0)], duration_s=20.0)
     report = run.companion.watch.summary()
     assert report["watch_evaluations"] > 30 and report["watch_conflicts_count"] == 0
     assert "SET_POSITION_TARGET_LOCAL_NED" not in [m.get_type() for _, m in to_vehicle]
@@ -134,6 +121,6 @@ def test_that_watch_without_a_mission_is_refused():
 
 
 def test_that_the_watch_ends_when_the_vehicle_lands_after_its_mission(tmp_path):
-    run, _ = _fly(tmp_path, [(6.0, -8.0, -5.0)], duration_s=40.0, final=21)
+    run, _ = fly_mission(tmp_path, [(6.0, -8.0, -5.0)], duration_s=40.0, final=21)
     assert run.companion.sequencer.phase is Phase.WATCH_ENDED
     assert np.isfinite(run.truth["sim_time_s"])

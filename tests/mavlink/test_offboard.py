@@ -491,6 +491,59 @@ def test_that_watching_without_arm_waits_for_the_operator_and_a_link_loss_starts
     assert s.run(2.0).phase is Phase.WATCHING and s.sent == []
 
 
-def test_that_a_takeover_other_than_always_or_watch_is_refused():
-    with pytest.raises(ConfigError, match="takeover must be one of always, watch"):
-        OffboardConfig(takeover="guard")
+def test_that_an_unknown_takeover_is_refused():
+    with pytest.raises(ConfigError, match="takeover must be one of always, watch, guard, got 'sometimes'"):
+        OffboardConfig(takeover="sometimes")
+
+
+# ---------------------------------------------------------------- takeover "guard"
+
+def _guarding():
+    s = Script(OffboardConfig(takeover="guard"), mode=px4.AUTO_MISSION, armed=True)
+    state = s.run(1.5)
+    assert state.phase is Phase.GUARDING and state.streaming and not state.engaged and s.sent == []
+    return s
+
+
+def test_that_a_guard_takes_over_and_commands_from_the_request_on():
+    s = _guarding()
+
+    def px4_vehicle(sc, msg):
+        if msg.command == 176 and msg.param2 == 6:
+            sc.mode = px4.OFFBOARD
+        elif msg.command == 176 and msg.param2 == 4:
+            sc.mode = px4.AUTO_MISSION
+
+    assert s.seq.take_over(s.t, "conflict in 4.0 s")
+    assert s.seq.state.engaged and s.seq.phase is Phase.TAKING_OVER      # commanding before the confirmation
+    assert not s.seq.take_over(s.t, "again")                               # one at a time
+    state = s.run(1.5, px4_vehicle)
+    assert state.phase is Phase.ENGAGED
+    requested, confirmed = s.seq.takeover_times
+    assert requested == pytest.approx(1.5) and confirmed == pytest.approx(2.0)   # the next HEARTBEAT
+    assert s.seq.resume_mission(s.t, "mission path clear")
+    state = s.run(1.5, px4_vehicle)
+    assert state.phase is Phase.GUARDING and not state.engaged and state.streaming
+    assert [(m.param2, m.param3) for _, m in s.sent] == [(6.0, 0.0), (4.0, 4.0)]
+
+
+def test_that_a_takeover_the_autopilot_refuses_goes_back_to_guarding():
+    s = _guarding()
+    assert s.seq.take_over(s.t, "conflict in 3.0 s")
+    state = s.run(8.0)                                   # PX4 stays in AUTO.MISSION whatever is asked
+    assert state.phase is Phase.GUARDING and len(s.sent) == 6     # 1 + 5 retries, then back
+    assert s.seq.take_over(s.t, "conflict in 1.0 s")   # and may be asked again
+
+
+def test_that_a_guard_never_takes_over_outside_the_mission_nor_keeps_a_pilots_switch():
+    s = _guarding()
+    s.mode = px4.AUTO_RTL                                # the operator (or a failsafe) sends it home
+    s.run(1.0)
+    assert not s.seq.take_over(s.t, "conflict") and s.seq.phase is Phase.GUARDING
+    s.mode = px4.AUTO_MISSION
+    s.run(1.0)
+    assert s.seq.take_over(s.t, "conflict")
+    s.mode = px4.OFFBOARD
+    s.run(1.0)
+    s.mode = px4.POSCTL                                  # a pilot takes the vehicle during the takeover
+    assert s.run(1.0).phase is Phase.PILOT_TOOK_OVER

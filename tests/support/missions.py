@@ -36,3 +36,18 @@ def plan_dict(waypoints_ned, *, origin: GeoPoint = MAVSIM_ORIGIN, takeoff_alt_m:
 
 def plan_text(waypoints_ned, **kw) -> str:
     return json.dumps(plan_dict(waypoints_ned, **kw), indent=2)
+
+
+def crossing_plan_text(waypoints_ned, *, speed_mps: float = 1.5, final: int = 20) -> str:
+    """A .plan: take-off to 5 m, DO_CHANGE_SPEED ``speed_mps``, the waypoints, then ``final`` (20
+    return; 21 a landing where the last waypoint is: a LAND at latitude 0 would fly there)."""
+    data = plan_dict(waypoints_ned, final=final)
+    items = data["mission"]["items"]
+    items.insert(1, {"type": "SimpleItem", "command": 178, "frame": 2, "autoContinue": True,
+                     "params": [1, speed_mps, -1, 0, 0, 0, 0]})
+    if final == 21:
+        items[-1]["params"][4:6] = items[-2]["params"][4:6]
+        items[-1]["frame"] = 3
+    for k, item in enumerate(items):
+        item["doJumpId"] = k + 1
+    return json.dumps(data, indent=1)

@@ -1,0 +1,65 @@
+"""``takeover = "guard"`` in mavsim lockstep: the autopilot flies its mission through the antipodal
+encounter; the companion takes over on the predicted conflict, flies round it and gives back."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.mavlink.autopilots import px4
+from companion.mavlink.offboard import Phase
+from tests.loop.test_mission_watch import fly_mission
+
+OFFBOARD_MAIN = 6
+
+
+@pytest.fixture(scope="module")
+def guarded(tmp_path_factory):
+    """The mission straight through the encounter (24 m north at 1.5 m/s, landing there), guarded."""
+    return fly_mission(tmp_path_factory.mktemp("g"), [(24.0, 0.0, -5.0)], duration_s=40.0, final=21, takeover="guard")
+
+
+def test_that_the_guard_takes_over_once_flies_clear_and_gives_back(guarded):
+    run, to_vehicle = guarded
+    c = run.companion
+    assert not run.truth["collided"]
+    (taken,) = c.guard.summary()["takeovers"]
+    # decided on the predicted conflict, seconds before the encounter (the watch alone collides at 8.0 s)
+    assert taken["start_s"] < 3.0 and taken["item"] == 2
+    assert 0.0 < taken["decision_to_offboard_s"] <= 0.15
+    assert taken["end_s"] is not None and taken["end_s"] < 12.0
+    # the promise held while the companion flew: every replan's realised contour at least c_min
+    assert c.state.min_realised_contour >= c.planner_config.c_min
+    # the mode requests: OFFBOARD once, then the mission mode once, and its current item made the waypoint first
+    modes = [(t, m.param2, m.param3) for t, m in to_vehicle if m.get_type() == "COMMAND_LONG" and m.command == 176]
+    assert [(p2, p3) for _, p2, p3 in modes] == [(OFFBOARD_MAIN, 0), (px4.MainMode.AUTO, px4.AutoSubMode.MISSION)]
+    current = [(t, m.seq) for t, m in to_vehicle if m.get_type() == "MISSION_SET_CURRENT"]
+    assert [seq for _, seq in current] == [2] and current[0][0] <= modes[1][0]
+
+
+def test_that_the_mission_is_flown_to_its_end_after_the_hand_back(guarded):
+    run, _ = guarded
+    c = run.companion
+    assert c.progress.summary()["autopilot_items_reached"] == [1, 2, 3]
+    assert c.sequencer.phase is Phase.WATCH_ENDED
+    texts = [text for _, text in c.state.events]
+    assert "companion: taking over, conflict in" in " ".join(texts)
+    assert any(t.startswith("companion: giving back, mission item 2") for t in texts)
+
+
+def test_that_the_stream_carries_the_vehicles_own_velocity_while_guarding(guarded):
+    """Before the takeover the setpoints are the vehicle's estimated velocity (flying north at the
+    mission's 1.5 m/s), so OFFBOARD entered before a plan would not stop it dead."""
+    run, to_vehicle = guarded
+    taken = run.companion.guard.summary()["takeovers"][0]["start_s"]
+    leg = [np.array([m.vx, m.vy, m.vz]) for t, m in to_vehicle
+           if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and 1.5 <= t < taken]
+    assert leg and all(abs(v[0] - 1.5) < 0.3 and abs(v[1]) < 0.3 for v in leg)
+
+
+def test_that_a_clear_mission_is_never_taken_over(tmp_path):
+    run, to_vehicle = fly_mission(tmp_path, [(0.0, -20.0, -5.0)], duration_s=20.0, takeover="guard")
+    assert run.companion.guard.summary()["takeovers_count"] == 0
+    assert run.companion.watch.summary()["watch_evaluations"] > 30
+    assert not [m for _, m in to_vehicle if m.get_type() == "COMMAND_LONG" and m.command == mavlink2.MAV_CMD_DO_SET_MODE]
