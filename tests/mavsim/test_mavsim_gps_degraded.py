@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pymavlink.dialects.v20 import common as mavlink2
 
-from mavsim.lockstep import LockstepSimulator
 from mavsim.scenario import ScenarioError, scenario_from_dict
+from tests.support.mavsim_client import hover_record
 
 START, LENGTH, SD = 2.0, 6.0, 1.5
 BASE_VAR = 0.0001
@@ -24,17 +23,7 @@ def _hover(seed: int, seconds: float = 10.0, **sim) -> tuple[np.ndarray, list[tu
     scenario = {"vehicle": {"start_ned_m": [0.0, 0.0, -5.0]},
                 "sim": {"position_noise_cov_m2": (BASE_VAR * np.eye(3)).tolist(), "stream_rates_hz": {"GPS_RAW_INT": 5.0},
                         "gps_degradations": [[START, LENGTH, SD]], **sim}}
-    parser = mavlink2.MAVLink(None)
-    out = []
-    with LockstepSimulator(scenario, seed=seed) as sim:
-        truth = sim.truth.drone_position_ned_m.copy()
-        for _ in range(int(seconds / 0.1)):
-            for _, packet in sim.advance(0.1):
-                for msg in parser.parse_buffer(packet) or []:
-                    if msg.get_type() in ("ODOMETRY", "GPS_RAW_INT"):
-                        out.append((sim.time_s, msg))
-        modes = [m for _, m in sim.simulator.commander.mode_changes]
-    return truth, out, modes
+    return hover_record(scenario, seed, seconds, ("ODOMETRY", "GPS_RAW_INT"))
 
 
 def test_that_a_degraded_gps_adds_the_error_its_covariance_reports_and_nothing_else():

@@ -16,24 +16,17 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from mavsim.lockstep import LockstepSimulator
 from mavsim.scenario import ScenarioError, scenario_from_dict
+from tests.support.mavsim_client import hover_record
 
 START, LENGTH = 4.0, 4.0
 
 
-def _hover(seed: int, seconds: float = 10.0, **sim) -> list[tuple[float, object]]:
-    """(sim time s, message) of ODOMETRY and GPS_RAW_INT while hovering in AUTO.LOITER."""
+def _hover(seed: int, seconds: float = 10.0, **sim) -> tuple[np.ndarray, list[tuple[float, object]]]:
+    """The true hover point and (sim time s, message) of ODOMETRY and GPS_RAW_INT while hovering in AUTO.LOITER."""
     scenario = {"vehicle": {"start_ned_m": [0.0, 0.0, -5.0]},
                 "sim": {"position_noise_cov_m2": (0.0001 * np.eye(3)).tolist(),
                         "gps_outages": [[START, LENGTH]], "stream_rates_hz": {"GPS_RAW_INT": 5.0}, **sim}}
-    parser = mavlink2.MAVLink(None)
-    out = []
-    with LockstepSimulator(scenario, seed=seed) as sim:
-        truth = sim.truth.drone_position_ned_m.copy()
-        for _ in range(int(seconds / 0.1)):
-            for _, packet in sim.advance(0.1):
-                for msg in parser.parse_buffer(packet) or []:
-                    if msg.get_type() in ("ODOMETRY", "GPS_RAW_INT"):
-                        out.append((sim.time_s, msg))
+    truth, out, _ = hover_record(scenario, seed, seconds, ("ODOMETRY", "GPS_RAW_INT"))
     return truth, out
 
 

@@ -91,3 +91,20 @@ def texts(msgs) -> list[str]:
 
 
 __all__ = ["Client", "vel_sp", "of_type", "acks", "texts", "AIRBORNE", "GROUND", "with_obstacles", "math"]
+
+
+def hover_record(scenario: dict, seed: int, seconds: float, types: tuple[str, ...]):
+    """Fly ``scenario`` (hovering, nobody commanding) in 0.1 s lockstep steps for ``seconds``: the true
+    hover point (NED m) at the start, (sim time s, message) of each message of ``types``, and the
+    autopilot's mode changes."""
+    parser = mavlink2.MAVLink(None)
+    out = []
+    with LockstepSimulator(scenario, seed=seed) as sim:
+        truth = sim.truth.drone_position_ned_m.copy()
+        for _ in range(int(seconds / 0.1)):
+            for _, packet in sim.advance(0.1):
+                for msg in parser.parse_buffer(packet) or []:
+                    if msg.get_type() in types:
+                        out.append((sim.time_s, msg))
+        modes = [m for _, m in sim.simulator.commander.mode_changes]
+    return truth, out, modes
