@@ -82,8 +82,8 @@ class MissionGuard:
             before = self.watch.evaluations
             out = self.watch.step(t_s, perception, seq.vehicle_in_mission)
             conflict = self.watch.open
-            if self.watch.evaluations > before and conflict is not None and conflict.start_s == t_s:
-                out.extend(self._take_over(t_s, conflict.lead_s))
+            if self.watch.evaluations > before and conflict is not None:   # (the stream may be too young yet)
+                out.extend(self._take_over(t_s, self.watch.lead_s))
             return out
         if phase is Phase.ENGAGED and self._current is not None:
             before = self.watch.evaluations

@@ -123,6 +123,8 @@ class MissionWatch:
         self.conflicts: deque[Conflict] = deque(maxlen=KEPT)
         self.conflict_count = 0
         self._open: Conflict | None = None
+        #: how far ahead the latest evaluation found its first step below ``c_min`` (s; None: clear)
+        self.lead_s: float | None = None
 
     @property
     def open(self) -> Conflict | None:
@@ -152,6 +154,7 @@ class MissionWatch:
             self.min_predicted_contour = smallest if best is None else min(best, smallest)
             out.append(messages.named_value_float(int(round(t_s * 1000)), "ct_pred", smallest))
         found = first_conflict(contours, self._ahead, self.cfg.c_min)
+        self.lead_s = None if found is None else found.in_s
         if found is not None and self._open is None:
             self._open = Conflict(t_s, found.in_s, names[found.obstacle], found.min_contour)
             self.conflicts.append(self._open)

@@ -391,6 +391,7 @@ class OffboardSequencer:
         self._start_held: str | None = None  # why the sequence may not leave WAIT_AUTOPILOT yet
         self._mission_started = False  # START_MISSION saw the mission mode (watch: started once a run)
         self._mission_seen = False     # the vehicle was seen in its mission mode while watching
+        self._stream_since: float | None = None   # link time the setpoint stream began (None: not streaming)
         #: link times of the last takeover: (requested, confirmed by HEARTBEAT or None)
         self.takeover_times: tuple[float, float | None] | None = None
 
@@ -404,12 +405,16 @@ class OffboardSequencer:
     def state(self) -> SequencerState:
         return SequencerState(
             phase=self._phase,
-            streaming=self._phase in _STREAMING,
+            streaming=self._streaming(self._phase),
             engaged=self._phase in _COMMANDING,
             since_s=self._since,
             attempts=self._pending.attempts if self._pending else 0,
             reason=self._reason,
         )
+
+    def _streaming(self, phase: Phase) -> bool:
+        """Whether setpoints stream in ``phase`` (a guard streams from its mission's start on)."""
+        return phase in _STREAMING or (phase is Phase.START_MISSION and self.config.takeover == "guard")
 
     @property
     def target(self) -> tuple[int, int] | None:
@@ -591,6 +596,8 @@ class OffboardSequencer:
         the vehicle armed in its mission mode)."""
         if self._phase is not Phase.GUARDING or not self.vehicle_in_mission:
             return False
+        if self._stream_since is None or t_s - self._stream_since < self.config.prestream_s - 1e-9:
+            return False   # PX4 refuses OFFBOARD until the stream has run a while (prestream_s)
         self.takeover_times = (t_s, None)
         self._transition(t_s, Phase.TAKING_OVER, f"{reason}; requesting {self._mode(ModeRole.OFFBOARD)}",
                          mavlink2.MAV_SEVERITY_WARNING)
@@ -992,6 +999,10 @@ class OffboardSequencer:
         old = self._phase
         if phase is Phase.TAKEOFF and self._home_alt_amsl_m is None and not self._kind.engagement.takeoff_above_home:
             reason += " (waiting for HOME_POSITION)"
+        if self._streaming(phase) and not self._streaming(old):
+            self._stream_since = t_s
+        elif not self._streaming(phase):
+            self._stream_since = None
         self._phase, self._since, self._reason = phase, t_s, reason
         logger.log(logging.WARNING if severity <= mavlink2.MAV_SEVERITY_WARNING else logging.INFO,
                    "offboard %s -> %s: %s", old.value, phase.value, reason)

@@ -547,3 +547,17 @@ def test_that_a_guard_never_takes_over_outside_the_mission_nor_keeps_a_pilots_sw
     s.run(1.0)
     s.mode = px4.POSCTL                                  # a pilot takes the vehicle during the takeover
     assert s.run(1.0).phase is Phase.PILOT_TOOK_OVER
+
+
+def test_that_a_guard_streams_from_the_missions_start_and_takes_over_only_after_the_prestream():
+    """PX4 refuses OFFBOARD ("Switching to Offboard is currently not available") until setpoints have
+    streamed a while: a conflict found early waits out ``prestream_s`` from the stream's start."""
+    s = Script(OffboardConfig(takeover="guard", arm=True, prestream_s=2.0), mode=px4.AUTO_LOITER, armed=True)
+    s.run(0.1)
+    assert s.seq.phase is Phase.START_MISSION and s.seq.state.streaming    # streaming before the mission starts
+    s.mode = px4.AUTO_MISSION
+    s.run(0.95)                                                             # the HEARTBEAT at 1.0 s shows it
+    assert s.seq.phase is Phase.GUARDING
+    assert not s.seq.take_over(s.t, "conflict") and s.seq.phase is Phase.GUARDING   # 1.05 s of stream
+    s.run(1.0)
+    assert s.seq.take_over(s.t, "conflict") and s.seq.phase is Phase.TAKING_OVER     # 2.05 s
