@@ -15,7 +15,7 @@ from companion.commands._loopback import free_udp_port, wait_for_udp_listener
 from companion.commands._argtypes import integer_at_least, positive_number, scenario_file, seed
 from companion.commands._view import add_view_arguments, open_view
 from companion.errors import ConfigError
-from companion.commands._defaults import COORDINATION_MODES, FORMULATIONS, MAX_SYSTEMS
+from companion.commands._defaults import COORDINATION_MODES, FORMULATIONS, MAX_SYSTEMS, TAKEOVER_CHOICES
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -48,6 +48,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "scenario's start and goal rotated about their midpoint for each (the swap: "
                         "`demo swap --drones 4`); with --realtime mavsim --vehicles N and N companion fly processes "
                         "over loopback UDP, each with its fleet links (docs/FLEET.md)")
+    p.add_argument("--takeover", default=None, choices=TAKEOVER_CHOICES,
+                   help="a mission scenario (mission_survey): always flies it in OFFBOARD (the default); watch lets the "
+                        "simulated autopilot fly it and announces predicted conflicts; guard lets it fly and takes over "
+                        "on them (lockstep; docs/MISSIONS.md)")
     p.add_argument("--coordination", default=None, choices=COORDINATION_MODES,
                    help="with --drones: how the drones use each other's announced plans (default: the scenario's [fleet])")
     add_view_arguments(p)
@@ -72,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     if args.crowd and not args.realtime:
         raise ConfigError("--crowd needs --realtime")
+    if args.takeover is not None and (args.realtime or args.drones > 1):
+        raise ConfigError("--takeover is for the lockstep demo of one drone (companion fly --takeover in real time)")
     if args.crowd > MAX_SYSTEMS:
         raise ConfigError(f"--crowd: at most {MAX_SYSTEMS} systems, got {args.crowd}")
     if args.drones > 1 or args.coordination:
@@ -129,6 +135,22 @@ def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out
     from companion.offline.harness import LOCKSTEP_EPOCH_S
 
     view = open_view(args, threaded=False, time_offset_s=LOCKSTEP_EPOCH_S)
+    offboard, path = None, []
+    if getattr(args, "takeover", None) is not None:
+        import dataclasses
+
+        from companion.loop.config import load_scenario
+
+        offboard = dataclasses.replace(load_scenario(scenario).offboard, takeover=args.takeover,
+                                       arm=args.takeover != "always" or load_scenario(scenario).offboard.arm)
+
+    def after_tick(companion, t_s: float, outbox) -> None:
+        est = companion.perception.drone.state   # the whole flight, the autopilot's parts too, for the top view
+        if est is not None:
+            path.append(est.position.copy())
+        if view is not None:
+            view(companion, t_s, outbox)
+
     t0 = time.perf_counter()
     try:
         result = run_lockstep(
@@ -136,7 +158,8 @@ def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out
             seed=args.seed,
             tlog_path=out / "companion.tlog" if out else None,
             sim_tlog_path=out / "mavsim.tlog" if out else None,
-            after_tick=view,
+            after_tick=after_tick,
+            offboard=offboard,
             **overrides,
         )
     finally:
@@ -154,7 +177,8 @@ def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out
         except ImportError:  # figures module not present in this build
             summary["figures"] = []
         else:
-            summary["figures"] = [str(p) for p in write_flight_figures(result.companion, out, truth=result.truth)]
+            summary["figures"] = [str(p) for p in write_flight_figures(result.companion, out, truth=result.truth,
+                                                                       path=path[::5])]
     return summary
 
 

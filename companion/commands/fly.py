@@ -236,8 +236,8 @@ def run(args: argparse.Namespace) -> int:
     for key in ("mission_items_reached_t_s", "autopilot_items_reached_t_s"):
         if key in report:
             report[key] = [round(t - started, 2) for t in report[key]]
-    for row in (*report.get("watch_conflicts", []), *report.get("takeovers", [])):
-        for key in ("start_s", "end_s", "offboard_s"):
+    for row in (*report.get("watch_conflicts", []), *report.get("takeovers", []), *report.get("mission_items_reached_by", [])):
+        for key in ("start_s", "end_s", "offboard_s", "t_s"):
             if row.get(key) is not None:
                 row[key] = round(row[key] - started, 2)
     if stats is not None:

@@ -133,9 +133,17 @@ class MissionGuard:
         return [set_current(item, target),
                 self.supervisor.say(t_s, SEV_NOTICE, f"companion: giving back, mission item {item}")]
 
+    def items_reached(self) -> list[tuple[float, int, str]]:
+        """Every mission item reached, in order, as (link time s, seq, by whom: ``"autopilot"`` flying
+        its mission, ``"companion"`` while taken over); the latest :data:`KEPT`."""
+        merged = [(t, seq, "autopilot") for t, seq in self.watch.progress.reached]
+        merged += [(t, seq, "companion") for t, seq in getattr(self.goal, "reached_items", ())]
+        return sorted(merged)[-KEPT:]
+
     def summary(self) -> dict:
-        """For the run report: every takeover (link times s) and how many."""
-        return {"takeovers_count": self.takeover_count,
+        """For the run report: every takeover (link times s) and how many, and the items reached by either."""
+        return {"mission_items_reached_by": [{"item": seq, "t_s": t, "by": by} for t, seq, by in self.items_reached()],
+                "takeovers_count": self.takeover_count,
                 "takeovers": [{"start_s": k.start_s, "offboard_s": k.offboard_s, "end_s": k.end_s, "reason": k.reason,
                                "item": k.item, "decision_to_offboard_s": k.decision_to_offboard_s}
                               for k in self.takeovers]}

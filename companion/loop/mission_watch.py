@@ -9,7 +9,8 @@ armed in its mission mode, predicts where the autopilot takes it over the planne
 ``[mission] autopilot_speed_mps``; :func:`companion.core.guard.path_along_route`), predicts
 every track and static obstacle in sensing range over the same steps, and judges the path by
 the planner's promise: the contour of touch of the drone's Gaussian (with the tracking margin)
-and each obstacle's, bodies included, may not fall below ``c_min``. A predicted conflict is
+and each obstacle's, bodies included, may not fall below ``c_min``; and the drone's body and
+``c_min`` ellipsoid may not reach the geofence (:meth:`MissionWatch._fence_step`). A predicted conflict is
 announced when it appears (STATUSTEXT ``companion: conflict in 2.4 s, contour 0.42``) and when
 the path is clear again, and each is kept for the report; the smallest predicted contour goes
 to the ground station every evaluation as NAMED_VALUE_FLOAT ``ct_pred``.
@@ -32,6 +33,7 @@ from companion.loop.config import LoopConfig, MissionConfig
 from companion.loop.perception import Perception
 from companion.loop.request_builder import RequestBuilder
 from companion.loop.supervisor import SEV_NOTICE, SEV_WARNING, RateLimiter, Supervisor
+from companion.loop.track_selection import confidence_radius, reach_m
 from companion.mavlink import messages
 
 logger = logging.getLogger(__name__)
@@ -88,8 +90,8 @@ class Conflict:
     """A predicted conflict on the autopilot's path, from its first evaluation to the first clear one.
 
     Times are link time (s); ``lead_s`` is how far ahead it was first predicted (s);
-    ``min_contour`` the smallest predicted contour of touch meanwhile; ``track`` the obstacle
-    first named (a track key as text, or ``static k``).
+    ``min_contour`` the smallest predicted contour of touch meanwhile (NaN: only the fence was in
+    the way); ``track`` what was first in the way (a track key as text, ``static k``, or ``fence``).
     """
 
     start_s: float
@@ -118,6 +120,7 @@ class MissionWatch:
         self._period = RateLimiter(planner_config.replan_period_s, tolerance_s=1e-9)
         n, tau = planner_config.horizon_steps, planner_config.step_s
         self._ahead = tau * np.arange(1, n + 1)      # s after now of each step
+        self._sigmas = confidence_radius(planner_config.c_min)
         self.evaluations = 0
         self.min_predicted_contour: float | None = None
         self.conflicts: deque[Conflict] = deque(maxlen=KEPT)
@@ -146,7 +149,9 @@ class MissionWatch:
         self.evaluations += 1
         position = est.position + est.velocity * max(0.0, t_v - est.t_s)
         path = path_along_route(position, route, self.mission.autopilot_speed_mps, self._ahead)
-        contours, names = self._contours(perception, t_v, position, path)
+        _, drone_covs = self.builder.drone_covariances(perception, t_v)
+        drone_covs = drone_covs + self.settings.tracking_margin_m2 * np.eye(3)
+        contours, names = self._contours(perception, t_v, position, path, drone_covs)
         out: Outbox = []
         if contours.size:
             smallest = float(contours.min())
@@ -154,17 +159,25 @@ class MissionWatch:
             self.min_predicted_contour = smallest if best is None else min(best, smallest)
             out.append(messages.named_value_float(int(round(t_s * 1000)), "ct_pred", smallest))
         found = first_conflict(contours, self._ahead, self.cfg.c_min)
-        self.lead_s = None if found is None else found.in_s
-        if found is not None and self._open is None:
-            self._open = Conflict(t_s, found.in_s, names[found.obstacle], found.min_contour)
+        fence_step = self._fence_step(path, drone_covs)
+        if fence_step is not None and (found is None or fence_step < found.step):
+            lead, what, contour, text = float(self._ahead[fence_step]), "fence", math.nan, "fence"
+        elif found is not None:
+            lead, what, contour = found.in_s, names[found.obstacle], found.min_contour
+            text = f"contour {found.contour:.2f}"
+        else:
+            lead = None
+        self.lead_s = lead
+        if lead is not None and self._open is None:
+            self._open = Conflict(t_s, lead, what, contour)
             self.conflicts.append(self._open)
             self.conflict_count += 1
-            out.append(self.supervisor.say(t_s, SEV_WARNING,
-                                           f"companion: conflict in {found.in_s:.1f} s, contour {found.contour:.2f}"))
-            logger.warning("predicted conflict on the autopilot's path: %s in %.1f s, contour %.3f (min %.3f)",
-                           names[found.obstacle], found.in_s, found.contour, found.min_contour)
-        elif found is not None:
-            self._open.min_contour = min(self._open.min_contour, found.min_contour)
+            out.append(self.supervisor.say(t_s, SEV_WARNING, f"companion: conflict in {lead:.1f} s, {text}"))
+            logger.warning("predicted conflict on the autopilot's path: %s in %.1f s, %s", what, lead, text)
+        elif lead is not None:
+            if found is not None:
+                self._open.min_contour = (found.min_contour if math.isnan(self._open.min_contour)
+                                          else min(self._open.min_contour, found.min_contour))
         elif self._open is not None:
             self._open.end_s = t_s
             self._open = None
@@ -178,8 +191,19 @@ class MissionWatch:
             return None
         return route_from(from_seq)
 
+    def _fence_step(self, path: np.ndarray, drone_covs: np.ndarray) -> int | None:
+        """The first step of ``path`` at which the drone's body and ``c_min`` ellipsoid would reach
+        the geofence (outside an inclusion zone, into an exclusion zone), or None (or no fence)."""
+        fence = getattr(getattr(self.builder, "fence", None), "fence", None)
+        if fence is None:
+            return None
+        for k, p in enumerate(path):
+            if fence.clearance(p) < reach_m(self.cfg.drone_radius_m, drone_covs[k], self._sigmas):
+                return k
+        return None
+
     def _contours(self, perception: Perception, t_v: float, position: np.ndarray,
-                  path: np.ndarray) -> tuple[np.ndarray, list[str]]:
+                  path: np.ndarray, drone_covs: np.ndarray) -> tuple[np.ndarray, list[str]]:
         """Contours of touch (M, N) along ``path`` with every obstacle in sensing range now, and their names."""
         times = t_v + self._ahead
         tracker = perception.tracker
@@ -205,8 +229,6 @@ class MissionWatch:
         n = len(self._ahead)
         if not means:
             return np.empty((0, n)), names
-        _, drone_covs = self.builder.drone_covariances(perception, t_v)
-        drone_covs = drone_covs + self.settings.tracking_margin_m2 * np.eye(3)
         radii_sum = self.cfg.drone_radius_m + np.asarray(radii, dtype=float)
         return path_contours(path, drone_covs, np.asarray(means), np.asarray(covs), radii_sum), names
 

@@ -102,6 +102,7 @@ def run_lockstep(
     after_tick: Callable[[Companion, float, list], None] | None = None,
     autopilot: str | None = None,
     replan_history: int | None = None,
+    truth_every_tick: bool = False,
     **planner_overrides,
 ) -> RunResult:
     """Fly one scenario in lockstep: ``mavsim`` and the companion over MAVLink bytes.
@@ -126,6 +127,9 @@ def run_lockstep(
         e.g. ``"ardupilot"``); None: mavsim's default (PX4).
     replan_history : keep only the latest this many replan records, as ``companion fly`` does
         (``Companion(replan_history=...)``); None keeps every one.
+    truth_every_tick : keep the drone's true position (NED m) after every tick in
+        ``extra["truth_trace"]`` as (sim time s, position) (a mission the autopilot flies
+        itself has no replans to judge it at).
     **planner_overrides : replace ``[planner]`` keys (e.g. ``formulation``, ``c_max``).
     """
     if isinstance(scenario, (str, Path)):
@@ -150,6 +154,7 @@ def run_lockstep(
     goal_t: float | None = None
     # True state at each replan (campaign: per-step collision truth beside the estimates).
     replan_truth: list[tuple[float, np.ndarray, dict]] = []
+    truth_trace: list[tuple[float, np.ndarray]] = []
 
     def lost(t_s: float, direction: str, packet: bytes) -> bool:
         if loss_probability > 0.0 and rng.random() < loss_probability:
@@ -181,6 +186,8 @@ def run_lockstep(
             outbox = driver.tick(sim.time_s)
             if after_tick is not None:
                 after_tick(companion, sim.time_s, outbox)
+            if truth_every_tick:
+                truth_trace.append((sim.time_s, sim.truth.drone_position_ned_m.copy()))
             if len(companion.records) > n_records:
                 tr = sim.truth
                 replan_truth.append((tr.t_s, tr.drone_position_ned_m, tr.obstacle_positions_ned_m))
@@ -206,7 +213,7 @@ def run_lockstep(
             companion=companion,
             sim_time_s=sim.time_s,
             dropped_packets=dropped,
-            extra={"replan_truth": replan_truth},
+            extra={"replan_truth": replan_truth, **({"truth_trace": truth_trace} if truth_every_tick else {})},
             tlog_path=Path(tlog_path) if tlog_path else None,
         )
     finally:

@@ -173,6 +173,16 @@ def format_report(report: dict) -> str:
         if intake.get("waiting_total"):  # before the vehicle clock or the origin was known: early, not wrong
             lines.append(f"{'obstacle reports before the time base'.ljust(width)}  {intake['waiting_total']}")
         lines.extend(f"  warning: {w}" for w in intake["warnings"])
+    if "takeover" in report:   # the autopilot flew its own mission: what was predicted, taken over, reached
+        lines.append(f"{'takeover'.ljust(width)}  {report['takeover']}")
+        lines.append(f"{'conflicts predicted on the mission path'.ljust(width)}  {report.get('watch_conflicts_count')}")
+        for k in report.get("takeovers", []):
+            lines.append(f"  taken over at {_fmt(k['start_s'])} s ({k['reason']}; OFFBOARD shown {_fmt(k['decision_to_offboard_s'])} s "
+                         f"later), given back at {_fmt(k['end_s'])} s")
+        reached = report.get("mission_items_reached_by")
+        if reached is not None:
+            lines.append(f"{'mission items reached'.ljust(width)}  "
+                         + (", ".join(f"{r['item']} ({r['by']})" for r in reached) or "none"))
     fs = report.get("alerts") or []
     lines.append(f"{'alerts (braking, slack, lost control)'.ljust(width)}  {len(fs)}")
     for t, text in fs:

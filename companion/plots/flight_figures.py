@@ -56,7 +56,8 @@ def _start_s(companion, records) -> float:
     return min(times) if times else 0.0
 
 
-def write_flight_figures(companion, out_dir: str | Path, truth: dict | None = None, *, prefix: str = "") -> list[Path]:
+def write_flight_figures(companion, out_dir: str | Path, truth: dict | None = None, *, prefix: str = "",
+                         path=None) -> list[Path]:
     """Draw the flight figures of a companion run (demo, replay) as PNGs in ``out_dir``.
 
     Parameters
@@ -72,6 +73,10 @@ def write_flight_figures(companion, out_dir: str | Path, truth: dict | None = No
         collision flag go into the top view's title.
     prefix : str
         Prepended to each file name (``antipodal_`` gives ``antipodal_topview.png``).
+    path : sequence of (3,) NED positions, optional
+        The drone's estimate over the whole flight (replans are recorded only while the companion
+        flies: a mission the autopilot flies itself is drawn from this), with the takeovers of a
+        guarding companion marked on it.
 
     Returns
     -------
@@ -84,13 +89,13 @@ def write_flight_figures(companion, out_dir: str | Path, truth: dict | None = No
     drawers = (("topview", _topview), ("contour", _contour), ("speed_accel", _speed_accel), ("solve_time", _solve_time))
     paths = []
     for name, draw in drawers:
-        path = out / f"{prefix}{name}.png"
-        fig = draw(companion, records, truth)
+        file = out / f"{prefix}{name}.png"
+        fig = _topview(companion, records, truth, path) if draw is _topview else draw(companion, records, truth)
         try:
-            fig.savefig(path, dpi=_DPI)
+            fig.savefig(file, dpi=_DPI)
         finally:
             plt.close(fig)
-        paths.append(path)
+        paths.append(file)
     logger.info("wrote %d flight figures to %s", len(paths), out)
     return paths
 
@@ -119,7 +124,7 @@ def _instants(records, n: int = 4) -> list[int]:
     return sorted(idx)
 
 
-def _topview(companion, records, truth):
+def _topview(companion, records, truth, path=None):
     cfg = companion.planner_config
     scenario = companion.scenario
     fig, ax = plt.subplots(figsize=(7.0, 6.4))
@@ -129,10 +134,21 @@ def _topview(companion, records, truth):
     ax.grid(True, alpha=0.3)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     pts = []
+    watched = getattr(companion, "watch", None) is not None
+    if path is not None and len(path):
+        flown = np.asarray(path, dtype=float).reshape(-1, 3)
+        pts.append(flown)
+        ax.plot(flown[:, 1], flown[:, 0], "-", color="0.55", lw=1.0,
+                label="flown by the autopilot (estimate)" if watched else "flown (estimate)")
     if records:
         p = np.array([r.drone_position for r in records])
         pts.append(p)
-        ax.plot(p[:, 1], p[:, 0], "-", color="k", lw=1.8, label="drone (estimate)")
+        if watched:   # replans only while taken over: each takeover its own stretch
+            breaks = np.flatnonzero(np.diff([r.t_link_s for r in records]) > 1.5 * cfg.replan_period_s + 0.5) + 1
+            for k, part in enumerate(np.split(p, breaks)):
+                ax.plot(part[:, 1], part[:, 0], "-", color="k", lw=2.2, label=None if k else "taken over (replans)")
+        else:
+            ax.plot(p[:, 1], p[:, 0], "-", color="k", lw=1.8, label="drone (estimate)")
         ax.plot(p[0, 1], p[0, 0], "o", color="k", ms=5)
     for i, key in enumerate(_tracks(records)):
         q = np.array([r.obstacle_positions[key] for r in records if key in r.obstacle_positions])
@@ -186,7 +202,7 @@ def _topview(companion, records, truth):
             extra.append("COLLISION" if truth.get("collided") else "no collision")
         if extra:
             title += "\n" + ", ".join(extra)
-    if not records:
+    if not records and (path is None or not len(path)):
         _no_data(ax, "no replans recorded")
     ax.set_title(title, fontsize=9)
     ax.legend(loc="best", fontsize=7)

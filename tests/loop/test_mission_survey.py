@@ -40,3 +40,36 @@ def test_the_fence_holds_in_truth_and_the_traffic_is_met_and_passed(survey):
     closest = survey.truth["min_distance_m"]
     assert len(closest) == 2 and all(1.0 < d < 4.0 for d in closest.values()), closest
     assert survey.summary()["min_realised_contour"] >= survey.companion.planner_config.c_min
+
+
+@pytest.fixture(scope="module")
+def guarded_survey():
+    """The same survey flown by mavsim's autopilot itself, guarded (``demo mission_survey --takeover guard``)."""
+    import dataclasses
+
+    from companion.loop.config import load_scenario
+
+    scenario = ROOT / "configs" / "mission_survey.toml"
+    offboard = dataclasses.replace(load_scenario(scenario).offboard, takeover="guard", arm=True)
+    return run_lockstep(scenario, seed=0, offboard=offboard, truth_every_tick=True)
+
+
+def test_a_guarded_survey_is_taken_over_for_the_building_only(guarded_survey):
+    """The autopilot flies the legs at 3 m/s ([sim] MPC_XY_CRUISE): the traffic, timed for the
+    companion's own flight, passes clear of it, so the one takeover is for the building on the
+    third leg (seen 8 s ahead), given back once round it."""
+    c = guarded_survey.companion
+    assert [w["track"] for w in c.watch.summary()["watch_conflicts"]] == ["fence"]
+    (taken,) = c.guard.summary()["takeovers"]
+    assert taken["item"] == 2 and taken["end_s"] is not None
+    assert not guarded_survey.truth["collided"]
+    assert c.state.min_realised_contour >= c.planner_config.c_min
+
+
+def test_a_guarded_survey_keeps_the_fence_in_truth_and_flies_every_item(guarded_survey):
+    radius = guarded_survey.companion.planner_config.drone_radius_m
+    clearance = min(FENCE.clearance(p) for _, p in guarded_survey.extra["truth_trace"])
+    assert clearance >= radius, clearance
+    by = guarded_survey.companion.guard.items_reached()
+    assert [seq for _, seq, _ in by if seq >= 1] == [1, 2, 3, 4, 5]    # the five waypoints in order, by either
+    assert {who for _, _, who in by} == {"autopilot", "companion"}
