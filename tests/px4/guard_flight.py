@@ -50,7 +50,8 @@ def _files(work: Path) -> tuple[Path, Path]:
 
 
 def guard_once(work: Path, seed: int = 0, takeover: str = "guard") -> dict:
-    """One run (see the module docstring); its figures."""
+    """One run (see the module docstring); its figures. Watching, PX4 flies the mission alone (the
+    traffic cannot change its flight): the baseline of the mission's duration (``mission_s``)."""
     work.mkdir(parents=True, exist_ok=True)
     scenario, plan = _files(work)
     tlog = work / "flight.tlog"
@@ -101,7 +102,55 @@ def guard_once(work: Path, seed: int = 0, takeover: str = "guard") -> dict:
     result["modes"] = [(round(t, 2), m) for t, m in player.mode_changes]
     result["px4_texts"] = [(round(t, 2), text.strip()) for t, text in player.texts]
     result["failsafe_texts"] = [text.strip() for _, text in player.texts if "ailsafe" in text]
+    # the mission's duration in PX4's words: from its first "Executing Mission" to "Mission finished, landed"
+    started = [t for t, text in player.texts if "Executing Mission" in text]
+    finished = [t for t, text in player.texts if "Mission finished" in text]
+    result["mission_s"] = round(finished[0] - started[0], 2) if started and finished else None
+    result["mode_switch_after_s"] = mode_switch_latency(work / "sih", tlog)
     return result
+
+
+#: PX4's nav_state (vehicle_status) of the modes the companion requests: OFFBOARD 14, AUTO_MISSION 3
+NAV_STATE = {6: 14, 4: 3}
+
+
+def mode_switch_latency(sih_dir: Path, tlog: Path) -> list[tuple[int, float | None]] | None:
+    """For each mode the companion requested (DO_SET_MODE, param2 the main mode): how long after the
+    request PX4 itself switched (s), from PX4's log (vehicle_status ``nav_state``) with PX4's boot
+    clock mapped onto the tlog's by the least-delayed of PX4's stamped messages. None without a log
+    (or without pyulog, the ``view`` extra)."""
+    try:
+        from pyulog import ULog
+    except ImportError:
+        return None
+    from companion.mavlink.tlog import read_tlog
+
+    logs = sorted(sih_dir.glob("**/*.ulg"))
+    if not logs:
+        return None
+    status = ULog(str(logs[-1]), message_name_filter_list=["vehicle_status"]).get_dataset("vehicle_status").data
+    changes = [(t * 1e-6, int(n)) for t, n, before in zip(status["timestamp"][1:], status["nav_state"][1:],
+                                                           status["nav_state"][:-1]) if n != before]
+    offsets, requests = [], []
+    for t, m in read_tlog(tlog):
+        if m.get_type() in ("ATTITUDE", "LOCAL_POSITION_NED") and m.get_srcComponent() == 1:
+            offsets.append((t, t - m.time_boot_ms * 1e-3))
+        elif m.get_type() == "COMMAND_LONG" and m.get_srcComponent() == 191 and m.command == 176:
+            requests.append((t, int(m.param2)))
+    if not offsets:
+        return None
+    out = []
+    for t_req, main in requests:
+        # unix = PX4 boot + offset, from the least-delayed message within 2 s of the request (SIH's
+        # clock drifts from the wall clock by up to 1 % under load: one offset for the run is not enough)
+        near = [o for t, o in offsets if abs(t - t_req) < 2.0]
+        if not near:
+            out.append((main, None))
+            continue
+        offset = min(near)
+        after = [tb + offset - t_req for tb, n in changes if n == NAV_STATE.get(main) and tb + offset > t_req - 0.05]
+        out.append((main, round(float(after[0]), 3) if after else None))
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
