@@ -73,6 +73,7 @@ class MissionGuard:
         self.takeover_count = 0
         self._current: Takeover | None = None
         self._clear = 0   # evaluations in a row with the path clear, taken over
+        self._unflyable = None   # the conflict last found with no waypoint left to take over for
 
     def step(self, t_s: float, perception: Perception) -> Outbox:
         """This tick's part of the guard at link time ``t_s``: judge, take over, give back."""
@@ -111,12 +112,15 @@ class MissionGuard:
 
     def _take_over(self, t_s: float, lead_s: float) -> Outbox:
         item = self.watch.progress.current_seq
-        if item is None or not self.goal.resume_at(item):
-            logger.warning("conflict predicted with no waypoint left to fly (item %s): not taken over", item)
+        if item is None or not len(self.goal.route_from(item)):
+            if self._unflyable is not self.watch.open:   # said once a conflict
+                self._unflyable = self.watch.open
+                logger.warning("conflict predicted with no waypoint left to fly (item %s): not taken over", item)
             return []
         reason = f"conflict in {lead_s:.1f} s"
-        if not self.sequencer.take_over(t_s, reason):
+        if not self.sequencer.take_over(t_s, reason):   # (not yet: the stream is too young)
             return []
+        self.goal.resume_at(item)
         self.cycle.replan_now()
         self._current = Takeover(t_s, reason, item)
         self.takeovers.append(self._current)
@@ -126,6 +130,8 @@ class MissionGuard:
 
     def _give_back(self, t_s: float) -> Outbox:
         item = self.goal.current_seq
+        if item is None and self.goal.waypoints:   # the mission ends at its last waypoint: it, reached already
+            item = self.goal.waypoints[-1].seq
         target = self.sequencer.target
         if item is None or target is None or not self.sequencer.resume_mission(t_s, "mission path clear"):
             return []

@@ -63,3 +63,35 @@ def test_that_a_clear_mission_is_never_taken_over(tmp_path):
     assert run.companion.guard.summary()["takeovers_count"] == 0
     assert run.companion.watch.summary()["watch_evaluations"] > 30
     assert not [m for _, m in to_vehicle if m.get_type() == "COMMAND_LONG" and m.command == mavlink2.MAV_CMD_DO_SET_MODE]
+
+
+def test_that_a_mission_ending_at_its_last_waypoint_is_guarded_to_its_end(tmp_path):
+    """No landing nor return after the waypoint: taken over, given back, and the autopilot holds
+    at the end of its mission (AUTO.MISSION, complete)."""
+    run, _ = fly_mission(tmp_path, [(24.0, 0.0, -5.0)], duration_s=40.0, final=None, takeover="guard")
+    c = run.companion
+    (taken,) = c.guard.summary()["takeovers"]
+    assert taken["end_s"] is not None and not run.truth["collided"]
+    assert c.sequencer.phase is Phase.GUARDING and run.truth["final_mode"] == "AUTO.MISSION"
+    assert c.progress.mission_state == 5                       # MISSION_STATE_COMPLETE
+
+
+def test_that_a_vehicle_taken_over_past_the_last_waypoint_is_given_back_with_it_current():
+    """Taken over on the last leg and flown to the last waypoint (nothing after it), the companion
+    gives the vehicle back with that waypoint current (reached: the mission ends, the autopilot
+    holds) rather than holding it in OFFBOARD for ever."""
+    from types import SimpleNamespace
+
+    from companion.loop.mission_guard import MissionGuard
+    from companion.loop.mission_goal import Waypoint
+
+    asked = []
+    sequencer = SimpleNamespace(target=(1, 1), phase=Phase.ENGAGED,
+                                resume_mission=lambda t, why: asked.append((t, why)) or True)
+    goal = SimpleNamespace(current_seq=None, waypoints=[Waypoint(2, np.array([24.0, 0.0, -5.0]), 1.0)])
+    supervisor = SimpleNamespace(say=lambda t, sev, text: text)
+    guard = MissionGuard(SimpleNamespace(), sequencer, goal, SimpleNamespace(), supervisor)
+    sent = guard._give_back(12.0)
+    assert asked == [(12.0, "mission path clear")]
+    assert sent[0].get_type() == "MISSION_SET_CURRENT" and sent[0].seq == 2
+    assert sent[1] == "companion: giving back, mission item 2"

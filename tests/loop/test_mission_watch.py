@@ -32,7 +32,7 @@ def _scenario(plan_path: Path, duration_s: float = 30.0, takeover: str = "watch"
     return data
 
 
-def fly_mission(tmp_path: Path, waypoints, duration_s: float = 30.0, final: int = 20, takeover: str = "watch"):
+def fly_mission(tmp_path: Path, waypoints, duration_s: float = 30.0, final: int | None = 20, takeover: str = "watch"):
     """Fly the crossing mission through ``waypoints`` in lockstep; the run and the messages sent to the vehicle."""
     plan = tmp_path / "m.plan"
     plan.write_text(crossing_plan_text(waypoints, final=final))

@@ -38,9 +38,10 @@ def plan_text(waypoints_ned, **kw) -> str:
     return json.dumps(plan_dict(waypoints_ned, **kw), indent=2)
 
 
-def crossing_plan_text(waypoints_ned, *, speed_mps: float = 1.5, final: int = 20) -> str:
+def crossing_plan_text(waypoints_ned, *, speed_mps: float = 1.5, final: int | None = 20) -> str:
     """A .plan: take-off to 5 m, DO_CHANGE_SPEED ``speed_mps``, the waypoints, then ``final`` (20
-    return; 21 a landing where the last waypoint is: a LAND at latitude 0 would fly there)."""
+    return; 21 a landing where the last waypoint is: a LAND at latitude 0 would fly there; None:
+    nothing, the mission ends at its last waypoint)."""
     data = plan_dict(waypoints_ned, final=final)
     items = data["mission"]["items"]
     items.insert(1, {"type": "SimpleItem", "command": 178, "frame": 2, "autoContinue": True,
