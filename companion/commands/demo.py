@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         overrides["c_max"] = None
     from companion.offline.scenario_file import load_both  # imports mavsim: only the offline tools do
 
-    load_both(scenario, **overrides)  # both programs' sections, before anything starts
+    companion_scenario, _ = load_both(scenario, **overrides)  # both programs' sections, before anything starts
     if not args.realtime and (args.signing_key_file or args.signing_key_env):
         raise ConfigError("signing is for the UDP links of --realtime; the lockstep demo has none")
     _check_signing_key(args)
@@ -84,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
         from companion.commands._demo_fleet import run_fleet
 
         return run_fleet(scenario, args, overrides, out)
-    summary = _run_realtime(scenario, args, overrides, out) if args.realtime else _run_lockstep(scenario, args, overrides, out)
+    summary = (_run_realtime(scenario, args, overrides, out) if args.realtime
+               else _run_lockstep(scenario, args, overrides, out, companion_scenario.offboard))
     if args.json:
         print(json.dumps(summary, indent=2, default=str))
     else:
@@ -129,7 +130,9 @@ def _realtime_failure(summary: dict) -> int:
     return 0
 
 
-def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None) -> dict:
+def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out: Path | None,
+                  scenario_offboard) -> dict:
+    """The lockstep demo; ``scenario_offboard`` is the scenario's [offboard] section (used with --takeover)."""
     from companion.offline.harness import run_lockstep  # imports mavsim: only the demo and campaign do
 
     from companion.offline.harness import LOCKSTEP_EPOCH_S
@@ -139,10 +142,8 @@ def _run_lockstep(scenario: Path, args: argparse.Namespace, overrides: dict, out
     if getattr(args, "takeover", None) is not None:
         import dataclasses
 
-        from companion.loop.config import load_scenario
-
-        offboard = dataclasses.replace(load_scenario(scenario).offboard, takeover=args.takeover,
-                                       arm=args.takeover != "always" or load_scenario(scenario).offboard.arm)
+        offboard = dataclasses.replace(scenario_offboard, takeover=args.takeover,
+                                       arm=args.takeover != "always" or scenario_offboard.arm)
 
     def after_tick(companion, t_s: float, outbox) -> None:
         est = companion.perception.drone.state   # the whole flight, the autopilot's parts too, for the top view

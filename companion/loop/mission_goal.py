@@ -196,6 +196,11 @@ class MissionGoal:
         seq = self.waypoints[self.index].seq
         if not self.finished:
             return seq
+        return self._item_after(seq)
+
+    def _item_after(self, seq: int) -> int | None:
+        """The first mission item after item ``seq`` that is not a DO_JUMP (after the last waypoint:
+        a LAND, an RTL), or None."""
         return next((it.seq for it in (self.items or ())[seq + 1:] if it.command != mavlink2.MAV_CMD_DO_JUMP), None)
 
     def resume_at(self, seq: int) -> bool:
@@ -360,8 +365,8 @@ class MissionGoal:
             self.reached_items.append((t_s, seq))
             self.reached_count += 1
             said.append((mavlink2.MAV_SEVERITY_INFO, f"companion: mission item {seq} reached"))
-            if nxt is None:      # the last waypoint: the item after it that is not a DO_JUMP (a LAND, an RTL)
-                nxt = next((it.seq for it in (self.items or ())[seq + 1:] if it.command != mavlink2.MAV_CMD_DO_JUMP), None)
+            if nxt is None:      # the last waypoint: the item after it (a LAND, an RTL)
+                nxt = self._item_after(seq)
             if nxt is not None:
                 out.append(set_current(nxt, self._target))
         self._newly_reached = []

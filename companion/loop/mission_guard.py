@@ -101,9 +101,9 @@ class MissionGuard:
         taken = self._current
         if taken is None:
             return
-        if taken.offboard_s is None and phase is Phase.ENGAGED:
-            times = getattr(self.sequencer, "takeover_times", None)
-            taken.offboard_s = times[1] if times and times[1] is not None else t_s
+        if taken.offboard_s is None and phase is Phase.ENGAGED:   # since the HEARTBEAT that showed OFFBOARD
+            since = self.sequencer.state.since_s
+            taken.offboard_s = since if since is not None else t_s
         if phase not in (Phase.TAKING_OVER, Phase.ENGAGED, Phase.RESUMING_MISSION):
             taken.end_s = t_s
             self._current = None

@@ -136,6 +136,8 @@ _STREAMING = frozenset({Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED, 
                         Phase.TAKING_OVER, Phase.RESUMING_MISSION})
 #: Phases in which the companion's setpoints are flown (or will be, the moment the vehicle enters OFFBOARD).
 _COMMANDING = frozenset({Phase.ENGAGED, Phase.TAKING_OVER, Phase.RESUMING_MISSION})
+#: Phases from which a hand-back may start: a vehicle in OFFBOARD, or about to be, and streamed to.
+_HANDBACK_FROM = frozenset({Phase.PRESTREAM, Phase.REQUEST_OFFBOARD}) | _COMMANDING
 #: Phases in which nothing more happens (no heartbeat watch, no commands).
 _FINAL = frozenset({Phase.LINK_LOST, Phase.GAVE_UP, Phase.PILOT_TOOK_OVER, Phase.HELD, Phase.WATCH_ENDED})
 
@@ -392,8 +394,6 @@ class OffboardSequencer:
         self._mission_started = False  # START_MISSION saw the mission mode (watch: started once a run)
         self._mission_seen = False     # the vehicle was seen in its mission mode while watching
         self._stream_since: float | None = None   # link time the setpoint stream began (None: not streaming)
-        #: link times of the last takeover: (requested, confirmed by HEARTBEAT or None)
-        self.takeover_times: tuple[float, float | None] | None = None
 
     # ------------------------------------------------------------------ state
 
@@ -573,12 +573,10 @@ class OffboardSequencer:
     def hand_back(self, t_s: float, reason: str = "mission complete") -> bool:
         """Ask for Hold (AUTO.LOITER) and keep streaming until the HEARTBEAT shows the vehicle out of OFFBOARD.
 
-        Only from PRESTREAM, REQUEST_OFFBOARD or ENGAGED (a vehicle we may be
-        streaming to); elsewhere nothing is streaming and nothing is done. Returns
-        whether the hand-back started.
+        Only from PRESTREAM, REQUEST_OFFBOARD or a commanding phase (``_HANDBACK_FROM``: a vehicle
+        we may be streaming to); elsewhere nothing is done. Returns whether the hand-back started.
         """
-        if self._phase not in (Phase.PRESTREAM, Phase.REQUEST_OFFBOARD, Phase.ENGAGED, Phase.TAKING_OVER,
-                               Phase.RESUMING_MISSION):
+        if self._phase not in _HANDBACK_FROM:
             return False
         self._pending = None
         self._hand_back_asked = True
@@ -598,7 +596,6 @@ class OffboardSequencer:
             return False
         if self._stream_since is None or t_s - self._stream_since < self.config.prestream_s - 1e-9:
             return False   # PX4 refuses OFFBOARD until the stream has run a while (prestream_s)
-        self.takeover_times = (t_s, None)
         self._transition(t_s, Phase.TAKING_OVER, f"{reason}; requesting {self._mode(ModeRole.OFFBOARD)}",
                          mavlink2.MAV_SEVERITY_WARNING)
         self._send(t_s, messages.set_mode_command(self._kind, ModeRole.OFFBOARD, True, **self._tgt()))
@@ -792,7 +789,6 @@ class OffboardSequencer:
                                  "mission; watch ended", mavlink2.MAV_SEVERITY_NOTICE)
         elif phase is Phase.TAKING_OVER:
             if hb.offboard and hb.armed:
-                self.takeover_times = (self.takeover_times[0] if self.takeover_times else t_s, t_s)
                 self._engage(t_s, f"{self._mode(ModeRole.OFFBOARD)} confirmed by HEARTBEAT; taken over")
             elif not hb.armed or hb.role is not ModeRole.MISSION:
                 self._pending = None

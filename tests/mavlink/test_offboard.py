@@ -516,11 +516,11 @@ def test_that_a_guard_takes_over_and_commands_from_the_request_on():
 
     assert s.seq.take_over(s.t, "conflict in 4.0 s")
     assert s.seq.state.engaged and s.seq.phase is Phase.TAKING_OVER      # commanding before the confirmation
+    assert s.seq.state.since_s == pytest.approx(1.5)                        # requested
     assert not s.seq.take_over(s.t, "again")                               # one at a time
     state = s.run(1.5, px4_vehicle)
     assert state.phase is Phase.ENGAGED
-    requested, confirmed = s.seq.takeover_times
-    assert requested == pytest.approx(1.5) and confirmed == pytest.approx(2.0)   # the next HEARTBEAT
+    assert state.since_s == pytest.approx(2.0)                              # confirmed by the next HEARTBEAT
     assert s.seq.resume_mission(s.t, "mission path clear")
     state = s.run(1.5, px4_vehicle)
     assert state.phase is Phase.GUARDING and not state.engaged and state.streaming
