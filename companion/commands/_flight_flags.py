@@ -41,6 +41,11 @@ def planner_overrides(args: argparse.Namespace) -> dict:
     return overrides
 
 
+def goal_given(args: argparse.Namespace) -> bool:
+    """Whether the flags say where to fly (``--goal`` or ``--mission``): the scenario then needs no goal."""
+    return args.goal is not None or args.mission is not None
+
+
 def offboard_settings(scenario_offboard, args: argparse.Namespace, mission=None):
     """The scenario's ``[offboard]`` with the flags applied (a flag wins over the file); with the
     scenario's ``[mission]`` (``mission``), a takeover that needs a mission is refused without one."""

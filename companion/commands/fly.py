@@ -25,7 +25,7 @@ from companion.commands._argtypes import (
     tlog_megabytes,
 )
 from companion.commands._defaults import DEFAULT_URL, FORMULATIONS, TAKEOVER_CHOICES
-from companion.commands._flight_flags import goal_keywords, offboard_settings, planner_overrides
+from companion.commands._flight_flags import goal_given, goal_keywords, offboard_settings, planner_overrides
 from companion.commands._view import add_view_arguments, open_view
 from companion.errors import CompanionError, ConfigError
 from companion.realtime.stream_priority import STREAM_FIFO_PRIORITY, stream_priority
@@ -160,7 +160,8 @@ def run(args: argparse.Namespace) -> int:
     from companion.offline.report import companion_report, format_report
     from companion.offline.scenario_file import load_both
 
-    scenario, _ = load_both(args.scenario, **planner_overrides(args))  # mavsim's sections too: never accept what mavsim rejects
+    scenario, _ = load_both(args.scenario, goal_elsewhere=goal_given(args),
+                            **planner_overrides(args))  # mavsim's sections too: never accept what mavsim rejects
     offboard = offboard_settings(scenario.offboard, args, scenario.mission)
     try:
         signing_key = load_signing_key(args.signing_key_file, args.signing_key_env)

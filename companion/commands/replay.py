@@ -18,7 +18,7 @@ import sys
 
 from companion.commands._argtypes import finite_number, non_negative_seconds, positive_number, scenario_file
 from companion.commands._defaults import FORMULATIONS
-from companion.commands._flight_flags import add_recorded_flight_flags, goal_keywords, offboard_settings, planner_overrides
+from companion.commands._flight_flags import add_recorded_flight_flags, goal_given, goal_keywords, offboard_settings, planner_overrides
 from companion.commands._view import add_view_arguments, open_view
 
 logger = logging.getLogger(__name__)
@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     from companion.loop.config import load_scenario
     from companion.offline.replay import replay
 
-    scenario = load_scenario(args.scenario, **overrides)
+    scenario = load_scenario(args.scenario, goal_elsewhere=goal_given(args), **overrides)
     offboard = offboard_settings(scenario.offboard, args)
     view = None
     if args.view is not None or args.mcap is not None:

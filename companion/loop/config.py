@@ -120,7 +120,8 @@ class StaticObstacle:
 class MissionConfig:
     """Where to go (``[mission]``): the goal, when it counts as reached, and waypoint spacing (m).
 
-    The goal is given in exactly one frame (:mod:`companion.loop.goal_frames`):
+    The goal is given in one frame (:mod:`companion.loop.goal_frames`), or as a mission (``plan_file``),
+    or not at all when ``fly --goal`` or ``--mission`` says where to fly:
     ``goal_ned_m`` (local NED, m), ``goal_home_m`` (north, east, up metres from home) or
     ``goal_geo`` (latitude, longitude degrees, altitude m; ``goal_geo_altitude`` says
     whether that is AMSL or relative to home). A goal in the local frame may not lie more
@@ -152,9 +153,8 @@ class MissionConfig:
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
         given = [k for k in ("goal_ned_m", "goal_home_m", "goal_geo", "plan_file") if getattr(self, k) is not None]
-        if len(given) != 1:
-            raise ConfigError("exactly one of goal_ned_m, goal_home_m, goal_geo, plan_file is required"
-                              + (f" (given: {', '.join(given)})" if given else ""))
+        if len(given) > 1:   # (none: the goal comes from elsewhere, fly --goal or --mission; see scenario_from_dict)
+            raise ConfigError(f"give one of goal_ned_m, goal_home_m, goal_geo, plan_file (given: {', '.join(given)})")
         set_("plan_upload", check.boolean("plan_upload", self.plan_upload))
         if self.plan_file is not None:
             set_("plan_file", check.text("plan_file", self.plan_file, max_len=4096))
@@ -171,7 +171,7 @@ class MissionConfig:
         set_("waypoint_spacing_m", check.number("waypoint_spacing_m", self.waypoint_spacing_m, positive=True, hi=1e4))
         set_("goal_wait_s", check.number("goal_wait_s", self.goal_wait_s, positive=True, hi=3600.0))
         set_("autopilot_speed_mps", check.number("autopilot_speed_mps", self.autopilot_speed_mps, positive=True, hi=100.0))
-        if self.plan_file is None:
+        if self.plan_file is None and given:
             self.goal_spec  # the frame's own checks (latitude range, distance)
 
     @property
@@ -181,7 +181,9 @@ class MissionConfig:
 
     @property
     def goal_spec(self) -> GoalSpec:
-        """The goal as given, in its frame (not for a ``plan_file`` mission)."""
+        """The goal as given, in its frame (not for a ``plan_file`` mission, nor with no goal given)."""
+        if self.goal_ned_m is None and self.goal_home_m is None and self.goal_geo is None:
+            raise ConfigError("[mission] has no goal (goal_ned_m, goal_home_m or goal_geo)")
         if self.goal_ned_m is not None:
             return GoalSpec("ned", tuple(self.goal_ned_m))
         if self.goal_home_m is not None:
@@ -318,7 +320,7 @@ class CompanionScenario:
         return np.array([w.offset for w in self.walls], dtype=float)
 
 
-def load_scenario(path: str | Path, **planner_overrides: Any) -> CompanionScenario:
+def load_scenario(path: str | Path, *, goal_elsewhere: bool = False, **planner_overrides: Any) -> CompanionScenario:
     """Read the companion's sections of a scenario TOML file (see :func:`scenario_from_dict`).
 
     Raises
@@ -327,7 +329,7 @@ def load_scenario(path: str | Path, **planner_overrides: Any) -> CompanionScenar
         The file cannot be read or parsed, or a section has a bad value or an unknown
         key (the message names the file, section and key).
     """
-    return scenario_from_dict(read_scenario_toml(path), Path(path), **planner_overrides)
+    return scenario_from_dict(read_scenario_toml(path), Path(path), goal_elsewhere=goal_elsewhere, **planner_overrides)
 
 
 def _section(data: Mapping[str, Any], name: str, where: str) -> Mapping[str, Any]:
@@ -377,13 +379,16 @@ def _map(data: Mapping[str, Any], path: Path) -> tuple[tuple[Wall, ...], tuple[S
     return tuple(walls), tuple(statics)
 
 
-def scenario_from_dict(data: Mapping[str, Any], path: str | Path = "<dict>", **planner_overrides: Any) -> CompanionScenario:
+def scenario_from_dict(data: Mapping[str, Any], path: str | Path = "<dict>", *, goal_elsewhere: bool = False,
+                       **planner_overrides: Any) -> CompanionScenario:
     """The companion's scenario from parsed TOML (``path`` names the file, or the source, in errors).
 
     Parameters
     ----------
     data : the parsed file (:func:`read_scenario_toml`, or a generated scenario).
     path : where it came from (a file, or e.g. ``"<scenario name>"``).
+    goal_elsewhere : the goal comes from elsewhere (``fly --goal`` or ``--mission``): ``[mission]``
+        may then have none of its own.
     **planner_overrides : values that replace ``[planner]`` keys (e.g. ``formulation``).
     """
     path = Path(path)
@@ -414,8 +419,9 @@ def scenario_from_dict(data: Mapping[str, Any], path: str | Path = "<dict>", **p
     mission_t = _section(data, "mission", where)
     if "goal_tolerance_m" not in mission_t:
         raise ConfigError(f"{path} [mission]: goal_tolerance_m is required")
-    if not any(k in mission_t for k in ("goal_ned_m", "goal_home_m", "goal_geo", "plan_file")):
-        raise ConfigError(f"{path} [mission]: goal_ned_m is required (or goal_home_m, goal_geo, plan_file)")
+    if not goal_elsewhere and not any(k in mission_t for k in ("goal_ned_m", "goal_home_m", "goal_geo", "plan_file")):
+        raise ConfigError(f"{path} [mission]: goal_ned_m is required (or goal_home_m, goal_geo, plan_file; "
+                          "or fly --goal or --mission)")
     mission_t = {"goal_ned_m": None, **mission_t}
     for key in ("plan_file", "fence_file"):
         if isinstance(mission_t.get(key), str) and not (key == "fence_file" and mission_t[key] == "vehicle"):

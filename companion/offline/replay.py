@@ -356,7 +356,7 @@ def replay(
     """
     path = Path(tlog_path)
     records = list(read_tlog(path))  # raises TlogError first: a bad log is the likelier mistake
-    scenario = load_scenario(scenario_path, **planner_overrides)
+    scenario = load_scenario(scenario_path, goal_elsewhere="goal" in (companion_keywords or {}), **planner_overrides)
     time_offset_s, lockstep = _align_clocks(records[0][0], time_offset_s)
     parsed = _parse(path, records, int(round(time_offset_s * _US)), companion_key)
     period_us = int(round(_US / scenario.companion.setpoint_rate_hz))  # as the harness advances mavsim: round(dt * 1e6)

@@ -27,8 +27,10 @@ from mavsim.scenario import scenario_from_dict as sim_scenario_from_dict
 logger = logging.getLogger(__name__)
 
 
-def load_both(path: str | Path, **planner_overrides: Any) -> tuple[CompanionScenario, SimScenario]:
-    """The companion's and mavsim's view of one scenario file, each fully validated.
+def load_both(path: str | Path, *, goal_elsewhere: bool = False,
+              **planner_overrides: Any) -> tuple[CompanionScenario, SimScenario]:
+    """The companion's and mavsim's view of one scenario file, each fully validated
+    (``goal_elsewhere``: see :func:`~companion.loop.config.scenario_from_dict`).
 
     Raises
     ------
@@ -36,7 +38,7 @@ def load_both(path: str | Path, **planner_overrides: Any) -> tuple[CompanionScen
         Either program rejects the file (the message names the file, section and key).
     """
     data = read_scenario_toml(path)
-    companion = scenario_from_dict(data, path, **planner_overrides)
+    companion = scenario_from_dict(data, path, goal_elsewhere=goal_elsewhere, **planner_overrides)
     try:
         sim = sim_scenario_from_dict(data, str(path))
     except ScenarioError as exc:

@@ -4,6 +4,8 @@ A mission flown in mavsim lockstep from a scenario's ``[mission] plan_file`` (up
 the vehicle first) replays exactly from that scenario, and from the scenario without it
 given ``--mission FILE``, the flag ``fly`` would have been given for the same flight; without
 either, the replay flies the scenario's single goal and says it did not reproduce the flight.
+A scenario with no goal at all needs the flag (as ``fly`` does): given it, the same replay;
+without it, one line naming the keys and the flags.
 """
 
 from __future__ import annotations
@@ -60,3 +62,18 @@ def test_without_the_mission_the_replay_is_not_reproduced_and_names_the_flag(mis
     out = _replay(d / "flight.tlog", without)
     assert out.returncode == 1
     assert "--mission" in out.stderr.strip().splitlines()[-1], out.stderr[-500:]
+
+
+def test_a_scenario_without_a_goal_replays_given_the_mission_and_is_refused_without(mission_flight):
+    d, plan, _, without = mission_flight
+    text = without.read_text()
+    goalless = d / "goalless.toml"
+    goalless.write_text("\n".join(line for line in text.splitlines() if not line.startswith("goal_ned_m")))
+    out = _replay(d / "flight.tlog", goalless, "--mission", str(plan))
+    assert out.returncode == 0, out.stderr[-1000:]
+    s = json.loads(out.stdout)
+    assert s["commands_compared"] == s["commands_recorded"] > 100 and s["max_abs_diff_mps"] == 0.0
+    out = _replay(d / "flight.tlog", goalless)
+    assert out.returncode == 2
+    line = out.stderr.strip().splitlines()[-1]
+    assert "goalless.toml [mission]: goal_ned_m is required" in line and "--mission" in line, out.stderr[-500:]
