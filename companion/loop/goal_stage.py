@@ -24,6 +24,10 @@ from companion.mavlink.offboard import OffboardConfig, Phase
 
 Outbox = list[mavlink2.MAVLink_message]
 
+#: s at the last waypoint of a mission that ends in a landing or a return before the vehicle is
+#: handed back for it (flown in OFFBOARD, without ``--exit-after-goal``)
+FINAL_ITEM_AFTER_S = 1.0
+
 
 class GoalStage:
     """What a goal source needs of the loop besides being asked where to go."""
@@ -77,11 +81,7 @@ class GoalStage:
         out.extend(self.supervisor.say(t_s, severity, text) for severity, text in prep.said)
         if prep.ready:
             self.pending = False
-            takeoff = getattr(self.goal, "takeoff_alt_m", None)
-            config = getattr(self.sequencer, "config", None)
-            if takeoff is not None and isinstance(config, OffboardConfig) and config.arm and config.takeoff_alt_m is None:
-                # the mission's NAV_TAKEOFF is the engage sequence's take-off (the sequence has not started)
-                self.sequencer.config = dataclasses.replace(config, takeoff_alt_m=max(1.0, float(takeoff)))
+            self._adopt_mission_ends()
             release = getattr(self.sequencer, "release_start", None)
             if release is not None:
                 release(t_s)
@@ -92,6 +92,25 @@ class GoalStage:
             if give_up is not None:
                 give_up(t_s, prep.failed)
         return out
+
+    def _adopt_mission_ends(self) -> None:
+        """A placed mission's take-off and end become the offboard sequence's (it has not started):
+        its NAV_TAKEOFF the take-off height (with ``arm`` and none asked for); flown in OFFBOARD
+        (``takeover = "always"``), its final NAV_LAND or NAV_RETURN_TO_LAUNCH the hand-back
+        :data:`FINAL_ITEM_AFTER_S` after the last waypoint (none asked for, ``--exit-after-goal``),
+        after which the item is the autopilot's (:meth:`MissionGoal.take_outbound`)."""
+        config = getattr(self.sequencer, "config", None)
+        if not isinstance(config, OffboardConfig):
+            return
+        changes: dict = {}
+        takeoff = getattr(self.goal, "takeoff_alt_m", None)
+        if takeoff is not None and config.arm and config.takeoff_alt_m is None:
+            changes["takeoff_alt_m"] = max(1.0, float(takeoff))
+        if (getattr(self.goal, "final_command", None) is not None and config.takeover == "always"
+                and config.hold_after_goal_s is None):
+            changes["hold_after_goal_s"] = FINAL_ITEM_AFTER_S
+        if changes:
+            self.sequencer.config = dataclasses.replace(config, **changes)
 
     def _inside_fence(self, prep: Preparation) -> Preparation:
         """The placed goal (every waypoint of a mission) inside the fence, or the run gives up naming it."""

@@ -18,7 +18,9 @@ mission (the loop's "goal reached"). What it does not fly itself:
 - NAV_TAKEOFF: its altitude (above home) becomes the engage sequence's take-off when the
   companion arms and no take-off altitude was given;
 - a final NAV_LAND or NAV_RETURN_TO_LAUNCH: the command sent to the autopilot once the
-  vehicle has been handed back (Hold) after the last waypoint (:attr:`final_command`);
+  vehicle has been handed back (Hold) after the last waypoint (:attr:`final_command`; flown in
+  OFFBOARD, the hand-back comes a second after the last waypoint unless ``--exit-after-goal``
+  says when: :meth:`companion.loop.goal_stage.GoalStage._adopt_mission_ends`);
 - DO_JUMP (param1: the item seq jumped to, param2: how many times; -1: for ever, as
   ArduPilot's; 0: never): followed when the waypoint before it is reached, so a mission that
   jumps back to its first waypoint is a patrol flown until the run ends (``--duration``, a

@@ -106,3 +106,21 @@ def test_that_a_vehicle_without_a_mission_is_one_error_and_nothing_flown(tmp_pat
     assert c.goal.transfer.done and c.goal.transfer.count == 0
     assert c.sequencer.phase is Phase.GAVE_UP and "the vehicle's mission: mission.items: the mission is empty" in c.goal_error
     assert c.records == [] and run.truth["final_mode"] == "AUTO.LOITER"
+
+
+def test_that_a_mission_ending_in_a_return_is_handed_to_the_autopilot_a_second_after_its_last_waypoint(flown):
+    """Flown in OFFBOARD with no --exit-after-goal, the final RTL still ends the flight: Hold a second
+    after the last waypoint, then the return commanded (not a hover in OFFBOARD until the run ends)."""
+    run, sent = flown
+    c = run.companion
+    mav = mavlink2.MAVLink(None)
+    mav.robust_parsing = True
+    commands = [(t, m.command) for t, direction, packet in sent if direction == "to_vehicle"
+                for m in (mav.parse_buffer(packet) or []) if m.get_type() == "COMMAND_LONG"]
+    rtl = [t for t, cmd in commands if cmd == mavlink2.MAV_CMD_NAV_RETURN_TO_LAUNCH]
+    assert len(rtl) == 1, commands
+    events = [(t, text) for t, text in c.state.events]
+    handing = [t for t, text in events if text.startswith("HANDING_BACK")]
+    assert handing and 1.0 - 1e-6 <= handing[0] - c.state.goal_reached_t_s <= 1.0 + 4.0   # (settling allowed)
+    assert "companion: mission ends, return (autopilot)" in [text for _, text in events]
+    assert run.truth["final_mode"] == "AUTO.RTL"
