@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
+from tests.px4.gcs import GroundStation, Item
 from tests.px4.sitl import OFFBOARD_URL, Sitl
 
-GCS_URL = "udpin:127.0.0.1:14550"
 EARTH_RADIUS_M = 6378137.0
 
 
@@ -62,33 +62,15 @@ def measure(work_dir: Path, timeout_s: float = 150.0) -> dict:
     from pymavlink import mavutil
 
     out: dict = {"events": [], "positions": [], "offboard_link_counts": {}}
-    with Sitl(work_dir):
-        gcs = mavutil.mavlink_connection(GCS_URL, source_system=255, source_component=190)
+    with Sitl(work_dir), GroundStation() as station:
+        gcs = station.conn
         onboard = mavutil.mavlink_connection(OFFBOARD_URL, source_system=245, source_component=191)
         try:
-            if gcs.wait_heartbeat(timeout=30) is None:
-                raise RuntimeError("no HEARTBEAT on PX4's ground link")
-            home = None
-            deadline = time.monotonic() + 60
-            while home is None and time.monotonic() < deadline:
-                gcs.mav.command_long_send(1, 1, 512, 0, 242, 0, 0, 0, 0, 0, 0)    # REQUEST_MESSAGE HOME_POSITION
-                msg = gcs.recv_match(type="HOME_POSITION", blocking=True, timeout=1)
-                if msg is not None:
-                    home = (msg.latitude * 1e-7, msg.longitude * 1e-7)
-            if home is None:
-                raise RuntimeError("no HOME_POSITION within 60 s")
-            items = _mission()
-            gcs.mav.mission_count_send(1, 1, len(items), 0)
-            while True:
-                msg = gcs.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True, timeout=5)
-                if msg is None:
-                    raise RuntimeError("mission upload: no answer")
-                if msg.get_type() == "MISSION_ACK":
-                    out["upload_ack"] = int(msg.type)
-                    break
-                command, frame, params, north, east, alt = items[msg.seq]
-                lat, lon = (0, 0) if north is None else _latlon(home, north, east)
-                gcs.mav.mission_item_int_send(1, 1, msg.seq, frame, command, 0, 1, *params, lat, lon, alt, 0)
+            station.wait_heartbeat()
+            home = station.wait_home()[:2]
+            items = [Item(command, frame, params, *((0, 0) if north is None else _latlon(home, north, east)), alt)
+                     for command, frame, params, north, east, alt in _mission()]
+            out["upload_ack"] = station.upload(items)
             for _ in range(20):
                 gcs.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
                 ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=1)
@@ -129,7 +111,6 @@ def measure(work_dir: Path, timeout_s: float = 150.0) -> dict:
             out["flown_s"] = round(time.monotonic() - start, 1)
             out["offboard_link_counts"] = dict(counts)
         finally:
-            gcs.close()
             onboard.close()
     return out
 

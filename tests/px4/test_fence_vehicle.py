@@ -18,7 +18,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -26,39 +25,23 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink.tlog import read_tlog
 from tests.loop.test_fence_flight import EXCLUSION, INCLUSION, LOCAL, _latlon
+from tests.px4.gcs import GroundStation, Item
 from tests.px4.sitl import REPO, Sitl, raise_priority, sitl_dir
 from tests.support.missions import plan_dict
 
 pytestmark = [pytest.mark.px4]
 
-GCS_URL = "udpin:127.0.0.1:14550"       # PX4's ground-station link (it sends from 18570)
 
-
-def upload_fence(timeout_s: float = 20.0) -> int:
+def upload_fence() -> int:
     """Upload the fence on PX4's ground link as a ground station does; PX4's MISSION_ACK result."""
-    from pymavlink import mavutil
-
     items = []
     for cmd, ring in ((mavlink2.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, INCLUSION),
                       (mavlink2.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION, EXCLUSION)):
-        items += [(cmd, len(ring), int(round(lat * 1e7)), int(round(lon * 1e7))) for lat, lon in _latlon(ring)]
-    gcs = mavutil.mavlink_connection(GCS_URL, source_system=255, source_component=190)
-    try:
-        assert gcs.wait_heartbeat(timeout=30) is not None, "no HEARTBEAT on PX4's ground link"
-        gcs.mav.mission_count_send(1, 1, len(items), mavlink2.MAV_MISSION_TYPE_FENCE)
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            msg = gcs.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True, timeout=1)
-            if msg is None or getattr(msg, "mission_type", 0) != mavlink2.MAV_MISSION_TYPE_FENCE:
-                continue
-            if msg.get_type() == "MISSION_ACK":
-                return int(msg.type)
-            cmd, n, lat, lon = items[msg.seq]
-            gcs.mav.mission_item_int_send(1, 1, msg.seq, mavlink2.MAV_FRAME_GLOBAL, cmd, 0, 1, n, 0, 0, 0, lat, lon, 0.0,
-                                          mavlink2.MAV_MISSION_TYPE_FENCE)
-        raise AssertionError(f"no MISSION_ACK for the fence within {timeout_s} s")
-    finally:
-        gcs.close()
+        items += [Item(cmd, mavlink2.MAV_FRAME_GLOBAL, (len(ring), 0, 0, 0), int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0)
+                  for lat, lon in _latlon(ring)]
+    with GroundStation() as gcs:
+        gcs.wait_heartbeat()
+        return gcs.upload(items, mavlink2.MAV_MISSION_TYPE_FENCE)
 
 
 def test_a_fence_uploaded_to_px4_is_downloaded_and_kept_through_a_mission(tmp_path):
