@@ -110,12 +110,14 @@ def guard_once(work: Path, seed: int = 0, takeover: str = "guard") -> dict:
     return result
 
 
-#: PX4's nav_state (vehicle_status) of the modes the companion requests: OFFBOARD 14, AUTO_MISSION 3
-NAV_STATE = {6: 14, 4: 3}
+#: PX4's nav_state (vehicle_status) of the modes the companion requests, by (main, sub) mode:
+#: OFFBOARD 14, AUTO.MISSION 3, AUTO.LOITER (Hold) 4
+NAV_STATE = {(6, 0): 14, (4, 4): 3, (4, 3): 4}
 
 
 def mode_switch_latency(sih_dir: Path, tlog: Path) -> list[tuple[int, float | None]] | None:
-    """For each mode the companion requested (DO_SET_MODE, param2 the main mode): how long after the
+    """For each mode the companion requested (DO_SET_MODE, param2 and param3 the main and sub mode;
+    reported by its main mode): how long after the
     request PX4 itself switched (s), from PX4's log (vehicle_status ``nav_state``) with PX4's boot
     clock mapped onto the tlog's by the least-delayed of PX4's stamped messages. None without a log
     (or without pyulog, the ``view`` extra)."""
@@ -136,11 +138,12 @@ def mode_switch_latency(sih_dir: Path, tlog: Path) -> list[tuple[int, float | No
         if m.get_type() in ("ATTITUDE", "LOCAL_POSITION_NED") and m.get_srcComponent() == 1:
             offsets.append((t, t - m.time_boot_ms * 1e-3))
         elif m.get_type() == "COMMAND_LONG" and m.get_srcComponent() == 191 and m.command == 176:
-            requests.append((t, int(m.param2)))
+            requests.append((t, (int(m.param2), int(m.param3))))
     if not offsets:
         return None
     out = []
-    for t_req, main in requests:
+    for t_req, mode in requests:
+        main = mode[0]
         # unix = PX4 boot + offset, from the least-delayed message within 2 s of the request (SIH's
         # clock drifts from the wall clock by up to 1 % under load: one offset for the run is not enough)
         near = [o for t, o in offsets if abs(t - t_req) < 2.0]
@@ -148,7 +151,7 @@ def mode_switch_latency(sih_dir: Path, tlog: Path) -> list[tuple[int, float | No
             out.append((main, None))
             continue
         offset = min(near)
-        after = [tb + offset - t_req for tb, n in changes if n == NAV_STATE.get(main) and tb + offset > t_req - 0.05]
+        after = [tb + offset - t_req for tb, n in changes if n == NAV_STATE.get(mode) and tb + offset > t_req - 0.05]
         out.append((main, round(float(after[0]), 3) if after else None))
     return out
 
