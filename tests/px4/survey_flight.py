@@ -27,30 +27,27 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
-import threading
-import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
-from companion.core.fence import Fence, PolygonZone
+from companion.loop.fence_source import place_fence
+from companion.loop.mission_file import parse_plan
 from companion.offline.campaign.toml_writer import write_scenario
-from mavsim.geo import global_to_ned
 from mavsim.scenario import load_scenario
 from mavsim.traffic import PlayerLinks, TrafficPlayer
-from tests.px4.flight import OBSTACLE_PORT, companion_argv
+from tests.px4.flight import OBSTACLE_PORT
 from tests.px4.gcs import GroundStation, plan_items
 from tests.px4.guard_flight import mode_switch_latency
 from tests.px4.sitl import PARAMS, REPO, Sitl
+from tests.px4.traffic_run import companion_report, fly_beside_traffic, px4_words, runs_main
 
 PLAN = REPO / "configs" / "mission_survey.plan"
 SCENARIO = REPO / "configs" / "mission_survey.toml"
 PX4_SCENARIO = REPO / "configs" / "antipodal_px4.toml"
 CRUISE_MPS = 3.0
-ENGAGE_HEIGHT_M = 4.3
 COMPANION_TIMEOUT_S = 200.0
 LANDING_WAIT_S = 60.0
 DRONE_RADIUS_M = 0.5
@@ -99,15 +96,6 @@ def files(work: Path, leg1_s: float = 10.0, leg5_s: float = 78.0, traffic: bool 
     return scenario, plan
 
 
-def fence_in_frame(plan: dict, origin: tuple[float, float, float]) -> Fence:
-    """The plan's polygons in PX4's local frame about ``origin`` (lat, lon deg, alt m)."""
-    zones = []
-    for zone in plan["geoFence"]["polygons"]:
-        ring = [global_to_ned(lat, lon, origin[2], *origin)[:2] for lat, lon in zone["polygon"]]
-        zones.append(PolygonZone(np.array(ring, dtype=float), bool(zone["inclusion"])))
-    return Fence(polygons=tuple(zones))
-
-
 def prepare_vehicle(plan: dict) -> dict:
     """Home awaited, then the mission and the fence uploaded on PX4's ground link as QGroundControl does."""
     mission, fence = plan_items(plan)
@@ -132,59 +120,26 @@ def fly_survey(work: Path, seed: int = 0, takeover: str = "guard", alone: bool =
         result["upload"] = prepare_vehicle(plan)
         player = TrafficPlayer(load_scenario(scenario), PlayerLinks(obstacle_port=OBSTACLE_PORT), seed=seed,
                                start="manual", keep_samples=True)
-        stop = threading.Event()
-
-        def engage_when_up() -> None:
-            while not stop.is_set() and not alone:
-                truth = player.samples["truth"]
-                if truth and -(truth[-1][1][2] - truth[0][1][2]) > ENGAGE_HEIGHT_M:
-                    player.engage()
-                    return
-                time.sleep(0.05)
-
         with player:
-            threads = [threading.Thread(target=lambda: player.run(COMPANION_TIMEOUT_S + 60.0, stop.is_set), daemon=True),
-                       threading.Thread(target=engage_when_up, daemon=True)]
-            for t in threads:
-                t.start()
-            try:
-                proc = subprocess.run(companion_argv(
-                    "fly", "--connect", "udpin:127.0.0.1:14540", "--scenario", str(scenario), "--mission", "vehicle",
-                    "--fence", "vehicle", "--takeover", takeover, "--arm", "--obstacles",
-                    f"udpin:127.0.0.1:{OBSTACLE_PORT}", "--tlog", str(tlog), "--duration", str(COMPANION_TIMEOUT_S - 20),
-                    "--json"), capture_output=True, text=True, timeout=COMPANION_TIMEOUT_S, cwd=REPO)
-                # the flight's end is PX4's (a landing handed to it): listen until it disarms
-                deadline = time.monotonic() + LANDING_WAIT_S
-                while time.monotonic() < deadline and not any("Disarmed" in text for _, text in player.texts):
-                    time.sleep(0.2)
-            finally:
-                stop.set()
-                for t in threads:
-                    t.join(timeout=5.0)
-    (work / "companion.stderr").write_text(proc.stderr)
-    report = json.loads(proc.stdout) if proc.stdout.strip().startswith("{") else {}
-    result["companion_rc"] = proc.returncode
-    result["companion_traceback"] = "Traceback" in proc.stderr
-    result["companion"] = {k: report.get(k) for k in (
+            # the flight's end is PX4's (a landing handed to it): listen until it disarms
+            proc = fly_beside_traffic(player, [
+                "--connect", "udpin:127.0.0.1:14540", "--scenario", str(scenario), "--mission", "vehicle",
+                "--fence", "vehicle", "--takeover", takeover, "--arm", "--obstacles",
+                f"udpin:127.0.0.1:{OBSTACLE_PORT}", "--tlog", str(tlog), "--duration", str(COMPANION_TIMEOUT_S - 20),
+                "--json"], timeout_s=COMPANION_TIMEOUT_S, move_traffic=not alone, until_disarmed_s=LANDING_WAIT_S)
+    result.update(companion_report(proc, work, (
         "outcome", "phase", "mission_items_reached", "mission_items_reached_by", "autopilot_items_reached",
         "watch_conflicts", "takeovers", "min_realised_contour", "replans_with_slack", "failed_plans",
-        "min_fence_clearance_m", "setpoint_gap_max_ms")}
-    result["events"] = report.get("events")
-    summary = player.summary()
-    result["engaged_at_s"] = summary["engaged_at_s"]
-    result["min_true_clearance_m"] = summary["referee"]["truth"]["min_clearance_m"]
-    truth = [(t, p) for t, p in player.samples["truth"]]
-    truth_t = np.array([t for t, _ in truth])
-    truth_p = np.array([p for _, p in truth]).reshape(-1, 3)
-    np.savez(work / "truth.npz", t=truth_t, p=truth_p, engaged=summary["engaged_at_s"] or np.nan)
+        "min_fence_clearance_m", "setpoint_gap_max_ms")))
+    result.update(px4_words(player))
+    truth_t = np.array([t for t, _ in player.samples["truth"]])
+    truth_p = np.array([p for _, p in player.samples["truth"]]).reshape(-1, 3)
+    np.savez(work / "truth.npz", t=truth_t, p=truth_p, engaged=result["engaged_at_s"] or np.nan)
     if player.origin is not None and truth_p.size:
-        fence = fence_in_frame(plan, player.origin)
+        fence = place_fence(parse_plan(json.dumps(plan)), *player.origin[:2])
         airborne = truth_p[-(truth_p[:, 2] - truth_p[0, 2]) > 1.0]
         result["min_true_fence_clearance_m"] = round(min(fence.clearance(p) for p in airborne) - DRONE_RADIUS_M, 3) \
             if len(airborne) else None
-    result["modes"] = [(round(t, 2), m) for t, m in player.mode_changes]
-    result["px4_texts"] = [(round(t, 2), text.strip()) for t, text in player.texts]
-    result["failsafe_texts"] = [text.strip() for _, text in player.texts if "ailsafe" in text]
     # the flight's duration in PX4's words, whoever flew it: from its arming to its disarming
     armed = [t for t, text in player.texts if text.startswith("Armed")]
     disarmed = [t for t, text in player.texts if text.startswith("Disarmed")]
@@ -195,20 +150,10 @@ def fly_survey(work: Path, seed: int = 0, takeover: str = "guard", alone: bool =
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("work", type=Path)
-    p.add_argument("--runs", type=int, default=1)
     p.add_argument("--takeover", choices=("guard", "watch", "always"), default="guard")
     p.add_argument("--alone", action="store_true",
                    help="PX4 flies the mission alone (watched): no traffic, no building in the fence")
-    p.add_argument("--json", type=Path, default=None)
-    args = p.parse_args(argv)
-    results = [fly_survey(args.work / f"run{k}", seed=k, takeover=args.takeover, alone=args.alone)
-               for k in range(args.runs)]
-    text = json.dumps(results, indent=1, default=str)
-    if args.json:
-        args.json.write_text(text)
-    print(text)
-    return 0
+    return runs_main(p, lambda work, k, args: fly_survey(work, seed=k, takeover=args.takeover, alone=args.alone), argv)
 
 
 if __name__ == "__main__":
