@@ -18,33 +18,37 @@ from companion.core.overlap import contour_of_touch
 from companion.errors import InputError
 
 
-def path_along_route(position: np.ndarray, route: np.ndarray, speed_mps: float, times_s: np.ndarray) -> np.ndarray:
-    """Where a vehicle at ``position`` (3,) flying straight legs through ``route`` (K, 3) at
-    ``speed_mps`` is at the times ``times_s`` (N,) after now (s, >= 0): (N, 3), NED m.
+def path_along_route(position: np.ndarray, route: np.ndarray, speed_mps, times_s: np.ndarray) -> np.ndarray:
+    """Where a vehicle at ``position`` (3,) flying straight legs through ``route`` (K, 3) is at the
+    times ``times_s`` (N,) after now (s, >= 0): (N, 3), NED m.
 
-    The first leg runs from ``position`` to ``route[0]``; after the last point the vehicle
-    stays there (the autopilot holds or lands at its last item). An empty route holds at
-    ``position``.
+    ``speed_mps``: the speed on every leg (m/s), or one speed per leg (K,): leg ``k`` ends at
+    ``route[k]`` (the mission's DO_CHANGE_SPEED items change it from one leg to the next). The
+    first leg runs from ``position`` to ``route[0]``; after the last point the vehicle stays
+    there (the autopilot holds or lands at its last item). An empty route holds at ``position``.
     """
     p0 = np.asarray(position, dtype=float).reshape(3)
     times = np.asarray(times_s, dtype=float).reshape(-1)
-    if not np.isfinite(speed_mps) or speed_mps <= 0.0:
-        raise InputError(f"speed_mps must be positive, got {speed_mps!r}")
-    if np.any(times < 0.0) or not np.all(np.isfinite(times)):
-        raise InputError("times_s must be finite and not negative")
     points = np.vstack([p0, np.asarray(route, dtype=float).reshape(-1, 3)])
     legs = np.diff(points, axis=0)
+    given = np.asarray(speed_mps, dtype=float)
+    if not np.all(np.isfinite(given)) or np.any(given <= 0.0):
+        raise InputError(f"speed_mps must be positive, got {speed_mps!r}")
+    speeds = np.broadcast_to(given, (len(legs),)) if given.ndim == 0 else given.reshape(-1)
+    if speeds.shape != (len(legs),):
+        raise InputError(f"speed_mps must be one speed or one per leg ({len(legs)}), got {given.size}")
+    if np.any(times < 0.0) or not np.all(np.isfinite(times)):
+        raise InputError("times_s must be finite and not negative")
     lengths = np.linalg.norm(legs, axis=1)
-    along = np.concatenate([[0.0], np.cumsum(lengths)])   # distance flown at each point (m)
-    distance = np.minimum(times * speed_mps, along[-1])
+    at = np.concatenate([[0.0], np.cumsum(lengths / speeds)])   # time at each point (s)
     out = np.empty((times.size, 3))
-    for i, s in enumerate(distance):
-        k = int(np.searchsorted(along, s, side="right")) - 1
+    for i, t in enumerate(np.minimum(times, at[-1])):
+        k = int(np.searchsorted(at, t, side="right")) - 1
         k = min(max(k, 0), len(legs) - 1) if len(legs) else 0
         if not len(legs) or lengths[k] == 0.0:
             out[i] = points[min(k + 1, len(points) - 1)] if len(legs) else p0
         else:
-            out[i] = points[k] + legs[k] * ((s - along[k]) / lengths[k])
+            out[i] = points[k] + legs[k] * ((t - at[k]) / (at[k + 1] - at[k]))
     return out
 
 

@@ -135,7 +135,8 @@ class MissionConfig:
     (time to goal), so the scenario file is its one source.
     ``autopilot_speed_mps``: the speed at which the autopilot flies its own mission legs (m/s;
     PX4's ``MPC_XY_CRUISE``, 5 by default; ArduCopter's ``WPNAV_SPEED`` / 100): the companion
-    predicts the autopilot's path with it while watching (``[offboard] takeover = "watch"``).
+    predicts the autopilot's path with it while watching (``[offboard] takeover = "watch"``),
+    on every leg the mission's own DO_CHANGE_SPEED items leave at the default.
     """
 
     goal_ned_m: np.ndarray | None

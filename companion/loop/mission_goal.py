@@ -25,8 +25,13 @@ mission (the loop's "goal reached"). What it does not fly itself:
   ArduPilot's; 0: never): followed when the waypoint before it is reached, so a mission that
   jumps back to its first waypoint is a patrol flown until the run ends (``--duration``, a
   signal). The leg after a jump starts at the waypoint reached, as any leg;
-- anything else (loiters, DO_CHANGE_SPEED and other DO_ items, a LAND or RTL that is not
-  last): skipped, listed in :attr:`skipped` and said once (not yet supported).
+- DO_CHANGE_SPEED (param1 0 or 1: air or ground speed; param2 m/s, -1 no change, -2 back to
+  the default): the speed of the autopilot's own legs after it, as a watching or guarding
+  companion predicts them (:meth:`route_speeds`; the default is ``[mission]
+  autopilot_speed_mps``). The companion's own legs keep its planner's speed: for its flight
+  the item is skipped (below);
+- anything else (loiters, other DO_ items, a LAND or RTL that is not last): skipped, listed in
+  :attr:`skipped` and said once (not yet supported).
 
 Memory does not grow with the flight: the report keeps the latest :data:`REACHED_KEPT`
 waypoints reached and counts them all (a patrol reaches one every few seconds for hours).
@@ -62,15 +67,22 @@ _FINAL = {mavlink2.MAV_CMD_NAV_LAND: "land", mavlink2.MAV_CMD_NAV_RETURN_TO_LAUN
 REACHED_KEPT = 1000
 #: DO_JUMP's repeat count that never runs out (ArduPilot's convention).
 JUMP_FOREVER = -1
+#: DO_CHANGE_SPEED's speed types that set the horizontal speed of a multicopter (air, ground speed),
+#: and its speed that returns to the default (-1, or any other value not positive, changes nothing)
+_HORIZONTAL_SPEED_TYPES = (0.0, 1.0)
+_SPEED_DEFAULT = -2.0
 
 
 @dataclass(frozen=True)
 class Waypoint:
-    """A NAV_WAYPOINT placed in the local frame: its item's seq, position (NED, m) and acceptance radius (m)."""
+    """A NAV_WAYPOINT placed in the local frame: its item's seq, position (NED, m), acceptance radius (m),
+    and the autopilot's speed on the leg to it set by the mission's DO_CHANGE_SPEED items before it
+    (m/s; None: the autopilot's default)."""
 
     seq: int
     position: np.ndarray
     acceptance_m: float
+    speed_mps: float | None = None
 
 
 @dataclass
@@ -223,9 +235,20 @@ class MissionGoal:
         it flies them: the first waypoint at or after that item, then the next ones, a DO_JUMP with
         jumps left followed once (a patrol's next lap; each waypoint at most twice). Empty once the
         current item is past the last waypoint (a landing, a return: the path holds where it is)."""
+        order = self._route_order(current_seq)
+        return np.array([self.waypoints[k].position for k in order], dtype=float).reshape(-1, 3)
+
+    def route_speeds(self, current_seq: int, default_mps: float) -> np.ndarray:
+        """The autopilot's speed on each leg of :meth:`route_from` (m/s, (K,)): the one its mission's
+        DO_CHANGE_SPEED items set before the leg's waypoint, else ``default_mps``. (After a DO_JUMP
+        the speed is that of the waypoint's first pass.)"""
+        speeds = [self.waypoints[k].speed_mps for k in self._route_order(current_seq)]
+        return np.array([default_mps if v is None else v for v in speeds], dtype=float)
+
+    def _route_order(self, current_seq: int) -> list[int]:
         start = next((k for k, w in enumerate(self.waypoints) if w.seq >= current_seq), None)
         if start is None:
-            return np.empty((0, 3))
+            return []
         order: list[int] = []
         followed: set[int] = set()
         index: int | None = start
@@ -238,7 +261,7 @@ class MissionGoal:
                 index = jump.to
             else:
                 index = index + 1 if index + 1 < len(self.waypoints) else None
-        return np.array([self.waypoints[k].position for k in order], dtype=float).reshape(-1, 3)
+        return order
 
     # ------------------------------------------------------------------ preparation
 
@@ -305,6 +328,7 @@ class MissionGoal:
             return Preparation(False)
         waypoints: list[Waypoint] = []
         jumps: list[tuple[int, int, int, int]] = []   # (seq, after waypoint index, target seq, repeat)
+        speed: float | None = None                      # the autopilot's leg speed set so far (None: its default)
         last = len(self.items) - 1
         for item in self.items:
             if item.command == mavlink2.MAV_CMD_NAV_WAYPOINT:
@@ -315,7 +339,7 @@ class MissionGoal:
                     return self._fail(f"mission item {item.seq}: {ned[2]:.1f} m below the local origin (under the ground "
                                       f"at home)", "companion: mission item below ground")
                 acceptance = item.params[1] if item.params[1] > 0.0 else self.mission.goal_tolerance_m
-                waypoints.append(Waypoint(item.seq, ned, float(acceptance)))
+                waypoints.append(Waypoint(item.seq, ned, float(acceptance), speed))
             elif item.command == mavlink2.MAV_CMD_NAV_TAKEOFF and not waypoints:
                 self.takeoff_alt_m = item.z if item.frame in RELATIVE_FRAMES else item.z - (home.point.alt_m if home else origin.alt_m)
             elif item.command in _FINAL and item.seq == last:
@@ -323,6 +347,9 @@ class MissionGoal:
             elif item.command == mavlink2.MAV_CMD_DO_JUMP:
                 jumps.append((item.seq, len(waypoints) - 1, int(item.params[0]), int(item.params[1])))
             else:
+                if item.command == mavlink2.MAV_CMD_DO_CHANGE_SPEED and item.params[0] in _HORIZONTAL_SPEED_TYPES:
+                    speed = (item.params[1] if item.params[1] > 0.0 else
+                             None if item.params[1] == _SPEED_DEFAULT else speed)
                 self.skipped.append((item.seq, item.command))
         if not waypoints:
             return self._fail("the mission has no NAV_WAYPOINT item to fly", "companion: mission has no waypoint")

@@ -5,8 +5,9 @@ commands. :class:`MissionProgress` follows the autopilot through its mission (MI
 MISSION_ITEM_REACHED: PX4 sends each reached item about eleven times, so items are counted
 once each, not per message). :class:`MissionWatch`, every replan period while the vehicle is
 armed in its mission mode, predicts where the autopilot takes it over the planner's horizon
-(straight legs from the estimate through the mission's remaining waypoints at
-``[mission] autopilot_speed_mps``; :func:`companion.core.guard.path_along_route`), predicts
+(straight legs from the estimate through the mission's remaining waypoints, each at the speed
+the mission's DO_CHANGE_SPEED items set for it, else ``[mission] autopilot_speed_mps``;
+:func:`companion.core.guard.path_along_route`), predicts
 every track and static obstacle in sensing range over the same steps, and judges the path by
 the planner's promise: the contour of touch of the drone's Gaussian (with the tracking margin)
 and each obstacle's, bodies included, may not fall below ``c_min``; and the drone's body and
@@ -142,13 +143,13 @@ class MissionWatch:
             return []
         t_v = perception.vehicle_time(t_s)
         est = perception.drone.state
-        route = self._route(self.progress.current_seq if from_seq is None else from_seq)
+        route, speeds = self._route(self.progress.current_seq if from_seq is None else from_seq)
         if t_v is None or est is None or t_v - est.t_s > self.settings.estimate_timeout_s or route is None:
             return []
         self._period.take(t_s)
         self.evaluations += 1
         position = est.position + est.velocity * max(0.0, t_v - est.t_s)
-        path = path_along_route(position, route, self.mission.autopilot_speed_mps, self._ahead)
+        path = path_along_route(position, route, speeds, self._ahead)
         _, drone_covs = self.builder.drone_covariances(perception, t_v)
         drone_covs = drone_covs + self.settings.tracking_margin_m2 * np.eye(3)
         contours, names = self._contours(perception, t_v, position, path, drone_covs)
@@ -184,12 +185,15 @@ class MissionWatch:
             out.append(self.supervisor.say(t_s, SEV_NOTICE, "companion: mission path clear"))
         return out
 
-    def _route(self, from_seq: int | None) -> np.ndarray | None:
-        """The mission's remaining waypoints from item ``from_seq`` (NED m), or None."""
-        route_from = getattr(self.builder.goal, "route_from", None)
+    def _route(self, from_seq: int | None) -> tuple[np.ndarray | None, np.ndarray | float]:
+        """The mission's remaining waypoints from item ``from_seq`` (NED m) and the autopilot's speed
+        on each leg to them (m/s), or None (no route known)."""
+        goal, default = self.builder.goal, self.mission.autopilot_speed_mps
+        route_from = getattr(goal, "route_from", None)
         if route_from is None or from_seq is None:
-            return None
-        return route_from(from_seq)
+            return None, default
+        route_speeds = getattr(goal, "route_speeds", None)
+        return route_from(from_seq), (default if route_speeds is None else route_speeds(from_seq, default))
 
     def _fence_step(self, path: np.ndarray, drone_covs: np.ndarray) -> int | None:
         """The first step of ``path`` at which the drone's body and ``c_min`` ellipsoid would reach

@@ -27,10 +27,26 @@ def test_that_points_on_top_of_each_other_and_an_empty_route_are_held():
     np.testing.assert_allclose(path[:, 1], [2.0, 3.0, 5.0, 5.0])
 
 
-@pytest.mark.parametrize("speed", [0.0, -1.0, float("nan")])
+def test_that_each_leg_is_flown_at_its_own_speed():
+    """A DO_CHANGE_SPEED between the legs: 10 m at 5 m/s (2 s), then 10 m at 2 m/s (5 s)."""
+    route = np.array([[10.0, 0.0, -5.0], [10.0, 10.0, -5.0]])
+    times = np.array([0.0, 1.0, 2.0, 3.0, 4.5, 7.0, 9.0])
+    path = path_along_route([0.0, 0.0, -5.0], route, [5.0, 2.0], times)
+    np.testing.assert_allclose(path, [[0, 0, -5], [5, 0, -5], [10, 0, -5], [10, 2, -5], [10, 5, -5], [10, 10, -5],
+                                      [10, 10, -5]])
+    np.testing.assert_allclose(path_along_route([0.0, 0.0, -5.0], route, [4.0, 4.0], times),
+                               path_along_route([0.0, 0.0, -5.0], route, 4.0, times))
+
+
+def test_that_speeds_not_one_per_leg_are_refused():
+    with pytest.raises(InputError, match="one per leg"):
+        path_along_route([0, 0, 0], [[1, 0, 0], [2, 0, 0]], [1.0, 1.0, 1.0], [0.0])
+
+
+@pytest.mark.parametrize("speed", [0.0, -1.0, float("nan"), [1.0, 0.0]])
 def test_that_a_speed_that_is_not_positive_is_refused(speed):
     with pytest.raises(InputError, match="speed_mps"):
-        path_along_route([0, 0, 0], [[1, 0, 0]], speed, [0.0])
+        path_along_route([0, 0, 0], [[1, 0, 0], [2, 0, 0]], speed, [0.0])
 
 
 def test_that_the_first_conflict_is_the_earliest_step_below_c_min():
