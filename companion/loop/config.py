@@ -137,6 +137,9 @@ class MissionConfig:
     PX4's ``MPC_XY_CRUISE``, 5 by default; ArduCopter's ``WPNAV_SPEED`` / 100): the companion
     predicts the autopilot's path with it while watching (``[offboard] takeover = "watch"``),
     on every leg the mission's own DO_CHANGE_SPEED items leave at the default.
+    ``autopilot_climb_mps``: the autopilot's take-off climb rate (m/s; PX4's ``MPC_TKO_SPEED``,
+    1.5 by default; ArduCopter's ``WPNAV_SPEED_UP`` / 100): while the autopilot is on its
+    mission's NAV_TAKEOFF, its path is predicted as a climb where it is, then the leg to the item.
     """
 
     goal_ned_m: np.ndarray | None
@@ -150,6 +153,7 @@ class MissionConfig:
     plan_upload: bool = True
     fence_file: str | None = None
     autopilot_speed_mps: float = 5.0
+    autopilot_climb_mps: float = 1.5
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
@@ -172,6 +176,7 @@ class MissionConfig:
         set_("waypoint_spacing_m", check.number("waypoint_spacing_m", self.waypoint_spacing_m, positive=True, hi=1e4))
         set_("goal_wait_s", check.number("goal_wait_s", self.goal_wait_s, positive=True, hi=3600.0))
         set_("autopilot_speed_mps", check.number("autopilot_speed_mps", self.autopilot_speed_mps, positive=True, hi=100.0))
+        set_("autopilot_climb_mps", check.number("autopilot_climb_mps", self.autopilot_climb_mps, positive=True, hi=50.0))
         if self.plan_file is None and given:
             self.goal_spec  # the frame's own checks (latitude range, distance)
 

@@ -16,7 +16,8 @@ current item set to the next one (MISSION_SET_CURRENT); the last waypoint ends t
 mission (the loop's "goal reached"). What it does not fly itself:
 
 - NAV_TAKEOFF: its altitude (above home) becomes the engage sequence's take-off when the
-  companion arms and no take-off altitude was given;
+  companion arms and no take-off altitude was given; placed (:attr:`takeoff`), it is where a
+  watching or guarding companion predicts the autopilot's climb to (:meth:`climb_route`);
 - a final NAV_LAND or NAV_RETURN_TO_LAUNCH: the command sent to the autopilot once the
   vehicle has been handed back (Hold) after the last waypoint (:attr:`final_command`; flown in
   OFFBOARD, the hand-back comes a second after the last waypoint unless ``--exit-after-goal``
@@ -127,6 +128,8 @@ class MissionGoal:
         self.index = 0                                  #: the waypoint flown to now
         self.next_index: int | None = None              #: the waypoint after it (None: it is the last)
         self.takeoff_alt_m: float | None = None         #: a NAV_TAKEOFF item's altitude above home
+        #: a NAV_TAKEOFF before the first waypoint, placed: (its seq, its position NED m)
+        self.takeoff: tuple[int, np.ndarray] | None = None
         self.final_command: int | None = None           #: a last NAV_LAND / NAV_RETURN_TO_LAUNCH
         self.skipped: list[tuple[int, int]] = []        #: (seq, command) of items not flown
         #: waypoints reached, as (link time s, item seq), in order: the latest REACHED_KEPT
@@ -245,6 +248,23 @@ class MissionGoal:
         speeds = [self.waypoints[k].speed_mps for k in self._route_order(current_seq)]
         return np.array([default_mps if v is None else v for v in speeds], dtype=float)
 
+    def climb_route(self, current_seq: int, position: np.ndarray, climb_mps: float,
+                    default_mps: float) -> tuple[np.ndarray, np.ndarray]:
+        """The autopilot's path ahead while it is on its NAV_TAKEOFF (item ``current_seq``), with the
+        speed of each leg: up where the vehicle is (``position``, NED m) to the item's altitude at
+        ``climb_mps``, then to the item's position (PX4 flies there, measured on SITL), then the
+        waypoints (:meth:`route_from`, :meth:`route_speeds`). Empty (0, 3) when the current item is
+        not the take-off (the caller predicts from the waypoints alone)."""
+        if self.takeoff is None or current_seq != self.takeoff[0]:
+            return np.empty((0, 3)), np.empty(0)
+        top = self.takeoff[1]
+        route = self.route_from(current_seq + 1)
+        speeds = self.route_speeds(current_seq + 1, default_mps)
+        first = float(speeds[0]) if len(speeds) else default_mps
+        above = np.array([position[0], position[1], top[2]], dtype=float)
+        return (np.vstack([above, top, route]).reshape(-1, 3),
+                np.concatenate([[climb_mps, first], speeds]))
+
     def _route_order(self, current_seq: int) -> list[int]:
         start = next((k for k, w in enumerate(self.waypoints) if w.seq >= current_seq), None)
         if start is None:
@@ -342,6 +362,8 @@ class MissionGoal:
                 waypoints.append(Waypoint(item.seq, ned, float(acceptance), speed))
             elif item.command == mavlink2.MAV_CMD_NAV_TAKEOFF and not waypoints:
                 self.takeoff_alt_m = item.z if item.frame in RELATIVE_FRAMES else item.z - (home.point.alt_m if home else origin.alt_m)
+                spec = GoalSpec("geo", (item.x, item.y, item.z), "rel" if item.frame in RELATIVE_FRAMES else "amsl")
+                self.takeoff = (item.seq, place(spec, origin, home))
             elif item.command in _FINAL and item.seq == last:
                 self.final_command = item.command
             elif item.command == mavlink2.MAV_CMD_DO_JUMP:

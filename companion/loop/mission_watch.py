@@ -7,7 +7,8 @@ once each, not per message). :class:`MissionWatch`, every replan period while th
 armed in its mission mode, predicts where the autopilot takes it over the planner's horizon
 (straight legs from the estimate through the mission's remaining waypoints, each at the speed
 the mission's DO_CHANGE_SPEED items set for it, else ``[mission] autopilot_speed_mps``;
-:func:`companion.core.guard.path_along_route`), predicts
+:func:`companion.core.guard.path_along_route`; on the NAV_TAKEOFF item a climb where it is at
+``autopilot_climb_mps`` first, then the leg to the item), predicts
 every track and static obstacle in sensing range over the same steps, and judges the path by
 the planner's promise: the contour of touch of the drone's Gaussian (with the tracking margin)
 and each obstacle's, bodies included, may not fall below ``c_min``; and the drone's body and
@@ -143,12 +144,14 @@ class MissionWatch:
             return []
         t_v = perception.vehicle_time(t_s)
         est = perception.drone.state
-        route, speeds = self._route(self.progress.current_seq if from_seq is None else from_seq)
-        if t_v is None or est is None or t_v - est.t_s > self.settings.estimate_timeout_s or route is None:
+        if t_v is None or est is None or t_v - est.t_s > self.settings.estimate_timeout_s:
+            return []
+        position = est.position + est.velocity * max(0.0, t_v - est.t_s)
+        route, speeds = self._route(self.progress.current_seq if from_seq is None else from_seq, position)
+        if route is None:
             return []
         self._period.take(t_s)
         self.evaluations += 1
-        position = est.position + est.velocity * max(0.0, t_v - est.t_s)
         path = path_along_route(position, route, speeds, self._ahead)
         _, drone_covs = self.builder.drone_covariances(perception, t_v)
         drone_covs = drone_covs + self.settings.tracking_margin_m2 * np.eye(3)
@@ -185,13 +188,19 @@ class MissionWatch:
             out.append(self.supervisor.say(t_s, SEV_NOTICE, "companion: mission path clear"))
         return out
 
-    def _route(self, from_seq: int | None) -> tuple[np.ndarray | None, np.ndarray | float]:
-        """The mission's remaining waypoints from item ``from_seq`` (NED m) and the autopilot's speed
-        on each leg to them (m/s), or None (no route known)."""
+    def _route(self, from_seq: int | None, position: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | float]:
+        """The autopilot's path ahead from item ``from_seq`` for a vehicle at ``position`` (NED m): the
+        points it flies through and its speed on each leg to them (m/s); None when no route is known.
+        On the mission's NAV_TAKEOFF: the climb where it is, then the item and the waypoints."""
         goal, default = self.builder.goal, self.mission.autopilot_speed_mps
         route_from = getattr(goal, "route_from", None)
         if route_from is None or from_seq is None:
             return None, default
+        climb_route = getattr(goal, "climb_route", None)
+        if climb_route is not None:
+            route, speeds = climb_route(from_seq, position, self.mission.autopilot_climb_mps, default)
+            if len(route):
+                return route, speeds
         route_speeds = getattr(goal, "route_speeds", None)
         return route_from(from_seq), (default if route_speeds is None else route_speeds(from_seq, default))
 
