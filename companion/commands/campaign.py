@@ -46,15 +46,20 @@ from companion.errors import ConfigError
 
 logger = logging.getLogger(__name__)
 
-QUIET_LOGGERS = ("mavsim", "estimator", "companion.loop.app", "companion.core.planner", "companion.mavlink.offboard", "companion.mavlink.link")
+QUIET_LOGGERS = ("mavsim", "estimator", "companion.loop.app", "companion.core.planner", "companion.mavlink.offboard",
+                 "companion.mavlink.link", "companion.loop.mission_watch", "companion.loop.mission_goal",
+                 "companion.loop.mission_guard", "companion.loop.fence_source")
+#: --family mission's methods: the planner formulations guarding, and the autopilot alone
+MISSION_METHODS = ("hyperplane", "deterministic", "alone")
 
 
 def _methods(text: str) -> list[str]:
     names = [m.strip() for m in text.split(",") if m.strip()]
-    unknown = [m for m in names if m not in METHODS and m not in COORDINATION_MODES]
+    unknown = [m for m in names if m not in METHODS and m not in COORDINATION_MODES and m not in MISSION_METHODS]
     if not names or unknown:
         raise argparse.ArgumentTypeError(f"unknown method(s) {', '.join(unknown) or '(none)'}; choose from "
-                                         f"{', '.join(METHODS)} (--family swap: {', '.join(COORDINATION_MODES)})")
+                                         f"{', '.join(METHODS)} (--family swap: {', '.join(COORDINATION_MODES)}; "
+                                         f"--family mission: {', '.join(MISSION_METHODS)})")
     if len(set(names)) != len(names):
         raise argparse.ArgumentTypeError(f"method listed twice: {text}")
     return names
@@ -65,9 +70,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("campaign", help="Monte Carlo safety campaign: randomised encounters, per method",
                               description=__doc__.split("\n\n")[1], formatter_class=DefaultsHelpFormatter)
     cpus = os.cpu_count() or 1
-    p.add_argument("--family", choices=(*FAMILIES, "swap"), default="antipodal",
+    p.add_argument("--family", choices=(*FAMILIES, "swap", "mission"), default="antipodal",
                    help="kind of encounter; swap: --drones N drones swapping places on a circle, with crossing "
-                        "traffic, the methods being coordination modes (docs/FLEET.md)")
+                        "traffic, the methods being coordination modes (docs/FLEET.md); mission: randomised missions "
+                        "in a geofence with traffic across their legs, flown by the autopilot and guarded "
+                        f"(--takeover guard) with each formulation, or alone (methods {','.join(MISSION_METHODS)}; "
+                        "docs/MISSIONS.md)")
     p.add_argument("--drones", type=integer_between(2, 16, "a swap of 2 to 16 drones"), default=None, metavar="N",
                    help="with --family swap: drones per episode (2 to 16)")
     p.add_argument("--episodes", type=integer_between(1, MAX_EPISODES, "the most one campaign holds"), default=20,
@@ -136,14 +144,17 @@ def run(args: argparse.Namespace) -> int:
             logging.getLogger(name).setLevel(logging.ERROR)
     if args.family == "swap":
         return _run_swap(args)
+    if args.family == "mission":
+        return _run_mission(args)
     if args.drones is not None:
         raise ConfigError("--drones is for --family swap")
     if args.methods is None:
         args.methods = list(METHODS)
     wrong = [m for m in args.methods if m not in METHODS]
     if wrong:
-        raise ConfigError(f"--methods: {', '.join(wrong)} is a coordination mode (for --family swap); "
-                          f"the {args.family} family's methods are {', '.join(METHODS)}")
+        elsewhere = "a coordination mode (for --family swap)" if wrong[0] in COORDINATION_MODES else "for --family mission"
+        raise ConfigError(f"--methods: {wrong[0]} is {elsewhere}; the {args.family} family's methods are "
+                          f"{', '.join(METHODS)}")
     if args.save_scenario and args.episode is None:
         raise ConfigError("--save-scenario needs --episode I (which episode to save)")
     episodes = [args.episode] if args.episode is not None else range(args.episodes)
@@ -202,17 +213,7 @@ def _run_swap(args: argparse.Namespace) -> int:
     print(format_fleet_table(result.drones, result.summary, result.c_min))
     if store is not None:
         print(f"results: {store}")
-    if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(result.to_json(), indent=1, default=float))
-        print(f"wrote {path}")
-    failed = [r for r in result.runs if r.error is not None]
-    if failed:
-        print(f"companion campaign: error: {len(failed)} of {len(result.runs)} runs ended with an error (first: episode "
-              f"{failed[0].episode} {failed[0].mode}: {' '.join(str(failed[0].error).split())[:300]})", file=sys.stderr)
-        return 1
-    return 0
+    return _json_and_errors(args, result, result.runs)
 
 
 def _exit_code(result, store: Path | None) -> int:
@@ -237,3 +238,61 @@ def _exit_code(result, store: Path | None) -> int:
     where = f"; the runs are in {store}" if store is not None else ""
     print(f"companion campaign: error: {'; '.join(what)}{where}", file=sys.stderr)
     return 1
+
+
+def _run_mission(args: argparse.Namespace) -> int:
+    """``--family mission``: a mission campaign (:mod:`companion.offline.campaign.missions`)."""
+    from companion.offline.campaign import write_scenario
+    from companion.offline.campaign.mission_episodes import generate_mission
+    from companion.offline.campaign.missions import format_mission_table, run_mission_campaign
+
+    methods = args.methods if args.methods is not None else list(MISSION_METHODS)
+    wrong = [m for m in methods if m not in MISSION_METHODS]
+    if wrong:
+        raise ConfigError(f"--methods: {', '.join(wrong)} is not a method of --family mission ({', '.join(MISSION_METHODS)})")
+    for flag, used in (("--drones", args.drones is not None), ("--vehicle", args.vehicle != "lag"),
+                       ("--noise-correlation", args.noise_correlation > 0.0), ("--solver", args.solver != "osqp"),
+                       ("--duration", args.duration != DEFAULT_DURATION_S), ("--plot", args.plot)):
+        if used:
+            raise ConfigError(f"{flag} is not available with --family mission (each mission sets its own length)"
+                              if flag == "--duration" else f"{flag} is not available with --family mission")
+    if args.save_scenario and args.episode is None:
+        raise ConfigError("--save-scenario needs --episode I (which episode to save)")
+    if args.save_scenario:
+        ep = generate_mission(args.seed, args.episode, c_min=args.c_min)
+        scenario = Path(args.save_scenario)
+        plan = scenario.with_suffix(".plan")
+        scenario.parent.mkdir(parents=True, exist_ok=True)
+        plan.write_text(json.dumps(ep.plan, indent=1))
+        data = json.loads(json.dumps(ep.scenario))
+        data["mission"]["plan_file"] = plan.name
+        data["offboard"] = {"arm": True, "takeover": "guard"}
+        print(f"wrote {write_scenario(data, scenario)} and {plan} (fly it: companion demo {scenario})")
+    episodes = [args.episode] if args.episode is not None else range(args.episodes)
+    store = results_path(args)
+    result = run_mission_campaign(episodes, methods, args.seed, workers=args.workers, c_min=args.c_min,
+                                  results_path=store, resume=args.resume, scheduler=args.scheduler,
+                                  progress=args.progress)
+    print(format_mission_table(result.summary, result.c_min))
+    if store is not None:
+        print(f"results: {store}")
+    if args.episode is not None:
+        for row in result.runs:
+            print(json.dumps(row.to_json(), default=float))
+    return _json_and_errors(args, result, result.runs)
+
+
+def _json_and_errors(args: argparse.Namespace, result, runs) -> int:
+    """``--json``'s file written; exit 1 (one line naming the first) when runs ended with an error, else 0."""
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(result.to_json(), indent=1, default=float))
+        print(f"wrote {path}")
+    failed = [r for r in runs if r.error is not None]
+    if failed:
+        first = failed[0]
+        print(f"companion campaign: error: {len(failed)} of {len(runs)} runs ended with an error (first: episode "
+              f"{first.episode} {first.key[1]}: {' '.join(str(first.error).split())[:300]})", file=sys.stderr)
+        return 1
+    return 0

@@ -24,7 +24,6 @@ missing runs and refuses a file whose header differs.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import os
@@ -35,11 +34,11 @@ from typing import Sequence
 
 import numpy as np
 
-from companion.errors import ConfigError, InputError
+from companion.errors import InputError
 from companion.loop.fleet_config import COORDINATION_MODES
 from companion.offline.campaign.generate import episode_sim_seed
 from companion.offline.campaign.progress import Progress
-from companion.offline.campaign.run import fly_tasks
+from companion.offline.campaign.rows_file import RunRow, dash, fly_rows, open_rows, read_rows
 from companion.offline.campaign.stats import clopper_pearson, collision_bound
 
 logger = logging.getLogger(__name__)
@@ -51,8 +50,6 @@ RADIUS_RANGE_M = (5.0, 8.0)
 TRAFFIC_SPEED_MPS = (1.0, 2.0)
 #: m: how far out every drone plans around the aircraft and the other drones (``[traffic] range_m``).
 REPORT_RANGE_M = 30.0
-#: A results row longer than this is not one the campaign wrote.
-MAX_LINE_BYTES = 1024 * 1024
 
 
 def generate_swap(seed: int, index: int, drones: int, *, c_min: float = 0.90, duration_s: float = 40.0) -> list[dict]:
@@ -85,7 +82,7 @@ class FleetTask:
 
 
 @dataclass
-class FleetRun:
+class FleetRun(RunRow):
     """One finished run: its key, its scores (None on error) and its wall time."""
 
     episode: int
@@ -110,14 +107,6 @@ class FleetRun:
     @property
     def key(self) -> tuple[int, str]:
         return self.episode, self.mode
-
-    @property
-    def score(self):
-        """Itself once scored (what the progress bar counts), None for an error."""
-        return None if self.error is not None else self
-
-    def to_json(self) -> dict:
-        return asdict(self)
 
 
 def run_fleet_episode(task: FleetTask) -> FleetRun:
@@ -150,31 +139,8 @@ def fleet_header(drones: int, seed: int, c_min: float, duration_s: float) -> dic
 
 
 def read_fleet_results(path: Path) -> tuple[dict | None, dict[tuple[int, str], FleetRun]]:
-    """The header and the rows of a results file (a later row of a run replaces an earlier one;
-    an unfinished last line is dropped)."""
-    header, rows = None, {}
-    with open(path, "rb") as f:
-        for n, raw in enumerate(f):
-            if len(raw) > MAX_LINE_BYTES:
-                raise ConfigError(f"{path}: line {n + 1} is longer than {MAX_LINE_BYTES} bytes: not a fleet results file")
-            if not raw.endswith(b"\n"):
-                logger.warning("%s: the unfinished last line is dropped", path)
-                break
-            try:
-                obj = json.loads(raw)
-            except json.JSONDecodeError:
-                raise ConfigError(f"{path}: line {n + 1} is not JSON") from None
-            if n == 0:
-                if not isinstance(obj, dict) or obj.get("format") != FORMAT:
-                    raise ConfigError(f"{path}: not a fleet campaign results file (no {FORMAT} header)")
-                header = obj
-                continue
-            try:
-                run = FleetRun(**obj)
-            except TypeError as exc:
-                raise ConfigError(f"{path}: line {n + 1}: {exc}") from None
-            rows[run.key] = run
-    return header, rows
+    """The header and the rows of a results file (:func:`companion.offline.campaign.rows_file.read_rows`)."""
+    return read_rows(path, FORMAT, "fleet campaign", lambda obj: FleetRun(**obj))
 
 
 @dataclass
@@ -236,13 +202,9 @@ def format_fleet_table(drones: int, rows: Sequence[ModeSummary], c_min: float) -
         lines.append(
             f"| {r.mode} | {r.runs}{f' (+{r.errors} errors)' if r.errors else ''} | {r.collisions} "
             f"[{100 * r.collision_ci[0]:.1f}, {100 * r.collision_ci[1]:.1f} %] | {r.drone_drone} | {r.drone_traffic} | "
-            f"{r.goals} | {_f(r.time_to_all_goals_median_s, 2)} | {_f(r.min_pair_clearance_m, 3)} | {r.promise_broken} | "
-            f"{_f(r.min_peer_realised_contour, 4)} | {r.deadlock_runs} | {freq} ({r.bound:.2e}) |")
+            f"{r.goals} | {dash(r.time_to_all_goals_median_s, 2)} | {dash(r.min_pair_clearance_m, 3)} | {r.promise_broken} | "
+            f"{dash(r.min_peer_realised_contour, 4)} | {r.deadlock_runs} | {freq} ({r.bound:.2e}) |")
     return "\n".join(lines)
-
-
-def _f(value: float | None, digits: int) -> str:
-    return "-" if value is None else f"{value:.{digits}f}"
 
 
 @dataclass
@@ -274,41 +236,12 @@ def run_fleet_campaign(drones: int, episodes: Sequence[int], modes: Sequence[str
         raise InputError(f"unknown coordination mode(s) {', '.join(unknown) or '(none given)'} "
                          f"(known: {', '.join(COORDINATION_MODES)})")
     keys = [(int(i), m) for i in episodes for m in modes]
-    header = fleet_header(drones, seed, c_min, duration_s)
-    done: dict[tuple[int, str], FleetRun] = {}
-    out = None
-    if results_path is not None:
-        path = Path(results_path)
-        if path.exists() and path.stat().st_size > 0:
-            if not resume:
-                raise ConfigError(f"{path} exists: --resume to continue it, or name another file with --results")
-            old_header, done = read_fleet_results(path)
-            if old_header != header:
-                raise ConfigError(f"{path}: its runs were flown with {json.dumps(old_header)}, not {json.dumps(header)}")
-            out = open(path, "a", encoding="utf-8")
-        else:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            out = open(path, "w", encoding="utf-8")
-            out.write(json.dumps(header) + "\n")
-            out.flush()
+    out, done = open_rows(results_path, fleet_header(drones, seed, c_min, duration_s), resume, "fleet campaign",
+                          lambda obj: FleetRun(**obj))
     todo = [FleetTask(seed, i, drones, m, c_min, duration_s) for i, m in keys if (i, m) not in done]
     workers = max(1, min(workers or os.cpu_count() or 1, len(todo) or 1))
     bar = Progress(f"campaign swap x{drones}", len(keys), len(keys) - len(todo), mode=progress)
-    t0 = time.perf_counter()
-
-    def finished(run: FleetRun) -> None:
-        done[run.key] = run
-        if out is not None:
-            out.write(json.dumps(run.to_json()) + "\n")
-            out.flush()
-        bar.update(run)
-
-    try:
-        n_workers, lost = fly_tasks(run_fleet_episode, todo, workers, scheduler, finished)
-    finally:
-        bar.close()
-        if out is not None:
-            out.close()
+    n_workers, lost, wall_s = fly_rows(run_fleet_episode, todo, workers, scheduler, out, done, bar)
     runs = [done[k] for k in keys if k in done]
     return FleetCampaign(int(drones), int(seed), float(c_min), runs, summarise_fleet(runs, modes, c_min),
-                         time.perf_counter() - t0, n_workers, extra={"lost": lost})
+                         wall_s, n_workers, extra={"lost": lost})
