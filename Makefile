@@ -70,7 +70,7 @@ campaign-test: $(STAMP)
 # Closed loops in wall-clock time over loopback UDP (mavsim and the companion as two processes).
 # Tests marked quarantine are not 20 of 20 in `make flake-check` yet: CI leaves them out.
 realtime-test: $(STAMP)
-	$(VENV)/bin/pytest -q -m 'realtime and not quarantine'
+	$(VENV)/bin/pytest -q -m 'realtime and not quarantine' --durations=30
 
 # fly through MAVProxy, the router (docs/FAULTS.md). MAVProxy goes into a venv of its own, without the
 # GUI's dependencies (vtk, opencv, wxPython: hundreds of MB a router does not use); MAVPROXY=PATH uses another.
@@ -97,7 +97,7 @@ soak: $(STAMP)
 	$(VPY) -m tests.support.soak --minutes $(SOAK_MIN) --out out/soak --json out/soak/soak.json
 
 px4-test: $(STAMP)
-	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -s -m 'px4 and not quarantine' tests/px4
+	PX4_SITL_DIR=$(PX4_SITL_DIR) $(VENV)/bin/pytest -q -s -m 'px4 and not quarantine' --durations=15 tests/px4
 
 # Three PX4 SITL instances swapping places with one companion each (docs/FLEET.md, "A PX4 fleet").
 px4-fleet-test: $(STAMP)
@@ -120,7 +120,7 @@ flake-check: $(STAMP)
 # Real ArduCopter SITL; `.ci/run` runs it when a build is present. Its tests marked quarantine (not yet
 # 20 of 20 in `make flake-check FLAKE_ARGS='--stage ardupilot'`) are left out, as for the other stages.
 ardupilot-test: $(STAMP)
-	ARDUPILOT_SITL_DIR=$(ARDUPILOT_SITL_DIR) $(VENV)/bin/pytest -q -s -m 'ardupilot and not quarantine' tests/ardupilot
+	ARDUPILOT_SITL_DIR=$(ARDUPILOT_SITL_DIR) $(VENV)/bin/pytest -q -s -m 'ardupilot and not quarantine' --durations=10 tests/ardupilot
 
 # The ArduCopter encounter with ADS-B traffic alone (`make ardupilot-test` flies it too).
 ardupilot-adsb-test: $(STAMP)
