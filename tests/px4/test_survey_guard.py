@@ -21,7 +21,8 @@ from tests.px4.sitl import sitl_dir
 from tests.px4.survey_flight import fly_survey
 
 pytestmark = [pytest.mark.px4,
-              pytest.mark.quarantine(reason="not yet through 20 rounds of make flake-check (the PX4 stage)")]
+              pytest.mark.quarantine(reason="14 of 15 rounds of make flake-check on 7 December: in one, the realised "
+                                            "contour while taken over for the ADS-B aircraft fell to 0.898 (c_min 0.9)")]
 
 C_MIN = 0.9
 
