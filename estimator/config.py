@@ -129,6 +129,12 @@ class TrackerConfig(_FromMapping):
     reinit_gap_s : float
         A report more than this after the track's last accepted one re-initialises
         the track, s. This also ends a lock-out by the gate.
+    reinit_after_gated : int
+        This many reports in a row refused by the gate re-initialise the track from the
+        last of them, however soon (>= 1). The gate refuses a lone outlier; a source that
+        keeps reporting where the model says it cannot be has changed what it does (an
+        aircraft parked, then flying off at 2 m/s, was refused for the whole
+        ``reinit_gap_s`` and unseen meanwhile: docs/notes/campaigns.md).
     drop_after_s : float
         :meth:`~estimator.ObstacleTracker.prune` drops tracks silent for longer, s.
     report_correlation_s : float
@@ -145,6 +151,7 @@ class TrackerConfig(_FromMapping):
     initial_velocity_std_mps: float = 3.0
     gate_probability: float = 0.9999
     reinit_gap_s: float = 1.5
+    reinit_after_gated: int = 3
     drop_after_s: float = 3.0
     report_correlation_s: float = 0.0
 
@@ -152,6 +159,10 @@ class TrackerConfig(_FromMapping):
         for f in dataclasses.fields(self):
             if f.name != "report_correlation_s":
                 _require_positive(self, f.name)
+        if not isinstance(self.reinit_after_gated, int):
+            raise EstimatorConfigError(
+                f"TrackerConfig.reinit_after_gated must be a whole number >= 1, got {self.reinit_after_gated!r}"
+            )
         if not (math.isfinite(self.report_correlation_s) and self.report_correlation_s >= 0.0):
             raise EstimatorConfigError(
                 f"TrackerConfig.report_correlation_s must be finite seconds >= 0, got {self.report_correlation_s!r}"

@@ -70,6 +70,10 @@ class ConstantVelocityFilter:
         Correlation time ``tau`` (s) of the reports' position errors; 0 (the default):
         white, the six-state filter. Above 0, the error is carried as states (module
         docstring).
+    reinit_after_gated : int or None
+        This many measurements in a row refused by the gate re-initialise the filter from
+        the last of them (Reason ``REINITIALISED``); None: only ``reinit_gap_s`` ends a
+        lock-out.
     """
 
     def __init__(
@@ -82,6 +86,7 @@ class ConstantVelocityFilter:
         label: str = "filter",
         adopt_reports: bool = False,
         report_correlation_s: float = 0.0,
+        reinit_after_gated: int | None = None,
     ) -> None:
         self._q = accel_noise_psd_m2ps3
         self._v0_var = initial_velocity_std_mps**2
@@ -89,6 +94,8 @@ class ConstantVelocityFilter:
         self._gate = gate_thresholds
         self._label = label
         self._adopt = adopt_reports
+        self._reinit_after_gated = reinit_after_gated
+        self._gated_in_row = 0   # measurements refused by the gate since the last accepted one
         if not (math.isfinite(report_correlation_s) and report_correlation_s >= 0.0):
             raise ValueError(f"report_correlation_s must be finite seconds >= 0, got {report_correlation_s!r}")
         self._tau = float(report_correlation_s)
@@ -159,12 +166,19 @@ class ConstantVelocityFilter:
         dof = m.z.size
         if self._gate is not None and not nis <= self._gate[dof]:
             kf.x, kf.P = x0, P0  # undo the prediction and the update: the estimate stays at self.t_s
+            self._gated_in_row += 1
+            if self._reinit_after_gated is not None and self._gated_in_row >= self._reinit_after_gated:
+                logger.info("%s: %d measurements in a row gated (NIS %.3g), re-initialising",
+                            self._label, self._gated_in_row, nis)
+                self._initialise(t_s, m)
+                return UpdateResult(True, Reason.REINITIALISED, t_s, nis, dof)
             return self._reject(
                 t_s, Reason.GATED, f"NIS {nis:.3g} > gate {self._gate[dof]:.3g} ({dof} dof)", nis, dof,
                 level=logging.INFO,
             )
         kf.P = symmetrise(kf.P)
         self.t_s = t_s
+        self._gated_in_row = 0
         return UpdateResult(True, Reason.UPDATED, t_s, nis, dof)
 
     def _model(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -226,6 +240,7 @@ class ConstantVelocityFilter:
             P[:3, 6:] = P[6:, :3] = -Rp
         self._kf.x, self._kf.P = x, P
         self.t_s = t_s
+        self._gated_in_row = 0
 
     def _reject(
         self, t_s: float, reason: Reason, detail: str, nis: float = math.nan, dof: int = 0,

@@ -19,7 +19,8 @@ class Reason(StrEnum):
     INITIALISED = "initialised"
     """Accepted: first measurement, the filter was created from it."""
     REINITIALISED = "reinitialised"
-    """Accepted: the gap since the last accepted measurement exceeded ``reinit_gap_s``."""
+    """Accepted: the gap since the last accepted measurement exceeded ``reinit_gap_s``, or the
+    gate had refused ``reinit_after_gated`` measurements in a row; the filter starts again from it."""
     OUT_OF_ORDER = "out_of_order"
     """Rejected: timestamp older than the last accepted measurement."""
     DUPLICATE = "duplicate"

@@ -138,6 +138,7 @@ class ObstacleTracker:
                 label=f"track {key!r}",
                 adopt_reports=bool(estimate),
                 report_correlation_s=0.0 if estimate else cfg.report_correlation_s,
+                reinit_after_gated=cfg.reinit_after_gated,
             )
             self._tracks[key] = track
             self._counts["tracks_created"] += 1

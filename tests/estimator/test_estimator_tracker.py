@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from estimator import ObstacleTracker, TrackerConfig, UnknownTrackError
-from estimator.errors import EstimatorInputError
+from estimator.errors import EstimatorConfigError, EstimatorInputError
 
 KEY = (101, 1)
 R = 0.02 * np.eye(3)
@@ -98,6 +98,46 @@ def test_that_a_gated_track_recovers_by_reinitialising_after_the_gap():
     assert tr.update(KEY, 1.3, jumped).reason == "gated"
     assert tr.update(KEY, 1.5, jumped).reason == "reinitialised"
     np.testing.assert_array_equal(tr.state(KEY).position, jumped)
+
+
+def parked_then_flying(cfg: TrackerConfig) -> tuple[ObstacleTracker, list]:
+    """A source parked 10 s (10 Hz reports with velocity, as ODOMETRY gives), then flying east at
+    2 m/s from 10.0 s on: the tracker and the reasons of its reports from 10.1 s on."""
+    tr = ObstacleTracker(cfg)
+    for k in range(100):
+        assert tr.update(KEY, 0.1 * k, [0.0, 0.0, -5.0], [0.0, 0.0, 0.0], R, 0.01 * np.eye(3)).accepted
+    reasons = []
+    for k in range(1, 16):
+        reasons.append(tr.update(KEY, 10.0 + 0.1 * k, [0.0, 0.2 * k, -5.0], [0.0, 2.0, 0.0], R, 0.01 * np.eye(3)).reason)
+    return tr, reasons
+
+
+def test_that_a_source_that_starts_moving_is_followed_after_three_gated_reports():
+    """Before ``reinit_after_gated`` the still track refused the flying source's reports for the
+    whole ``reinit_gap_s`` (1.5 s, 3 m of flight unseen); now the third refusal re-initialises it."""
+    tr, reasons = parked_then_flying(TrackerConfig(accel_noise_psd_m2ps3=0.01))
+    assert reasons[:3] == ["gated", "gated", "reinitialised"]
+    assert set(reasons[3:]) == {"updated"}
+    np.testing.assert_allclose(tr.state(KEY).velocity, [0.0, 2.0, 0.0], atol=0.05)
+    locked, reasons = parked_then_flying(TrackerConfig(accel_noise_psd_m2ps3=0.01, reinit_after_gated=100))
+    assert reasons.index("reinitialised") >= 13   # locked out 1.4 s or more: until the gap
+
+
+def test_that_lone_outliers_between_good_reports_never_reinitialise():
+    tr = tracked(TrackerConfig(reinit_after_gated=2))
+    t, u = 1.0, np.array([1.0, 0.0, 0.0])
+    for _ in range(5):
+        assert tr.update(KEY, t, innovation_at(tr, t, 10.0, u), None, R).reason == "gated"
+        t += 0.1
+        assert tr.update(KEY, t, innovation_at(tr, t, 0.5, u), None, R).reason == "updated"
+        t += 0.1
+    assert tr.stats.gated == 5 and tr.stats.reinitialised == 0
+
+
+@pytest.mark.parametrize("bad", [0, -1, 2.5, True, "3"])
+def test_that_reinit_after_gated_must_be_a_whole_number_of_reports(bad):
+    with pytest.raises(EstimatorConfigError, match="reinit_after_gated"):
+        TrackerConfig(reinit_after_gated=bad)
 
 
 def test_that_silent_tracks_are_dropped_and_recreated_on_a_new_report():
