@@ -412,6 +412,10 @@ class OffboardSequencer:
             reason=self._reason,
         )
 
+    def _prestreamed(self, t_s: float) -> bool:
+        """Whether setpoints have streamed ``prestream_s`` by link time ``t_s`` (OFFBOARD may be requested)."""
+        return self._stream_since is not None and t_s - self._stream_since >= self.config.prestream_s - 1e-9
+
     def _streaming(self, phase: Phase) -> bool:
         """Whether setpoints stream in ``phase`` (a guard streams from its mission's start on)."""
         return phase in _STREAMING or (phase is Phase.START_MISSION and self.config.takeover == "guard")
@@ -594,7 +598,7 @@ class OffboardSequencer:
         the vehicle armed in its mission mode)."""
         if self._phase is not Phase.GUARDING or not self.vehicle_in_mission:
             return False
-        if self._stream_since is None or t_s - self._stream_since < self.config.prestream_s - 1e-9:
+        if not self._prestreamed(t_s):
             return False   # PX4 refuses OFFBOARD until the stream has run a while (prestream_s)
         self._transition(t_s, Phase.TAKING_OVER, f"{reason}; requesting {self._mode(ModeRole.OFFBOARD)}",
                          mavlink2.MAV_SEVERITY_WARNING)
@@ -779,7 +783,9 @@ class OffboardSequencer:
             elif not hb.armed:
                 self._pending = None
                 self._transition(t_s, self._entry_phase(hb), "vehicle disarmed before its mission started")
-            elif self._pending is None:
+            elif self._pending is None and (not self._streaming(phase) or self._prestreamed(t_s)):
+                # a guard starts the mission once OFFBOARD may be entered: a conflict on the first metres
+                # of the mission (a building beside the start) is taken over at the first evaluation
                 self._send(t_s, messages.mission_start_command(**self._tgt()))
         elif phase in (Phase.WATCHING, Phase.GUARDING):
             if hb.role is ModeRole.MISSION and hb.armed:
