@@ -39,16 +39,19 @@ def test_that_an_episode_is_drawn_from_its_index_and_is_a_mission_an_operator_co
         building = Fence(polygons=(PolygonZone(ep.fence[1][0], False),))
         along = [route[k] + f * (route[k + 1] - route[k]) for k in range(len(route) - 1) for f in np.linspace(0, 1, 50)]
         assert min(building.clearance(p) for p in along) < -1.0
-    # the last waypoint is not passed on the way (the referee's goal), no aircraft crosses too soon
-    # or waits on a waypoint
+    # the last waypoint is not passed on the way (the referee's goal), no aircraft crosses too soon,
+    # waits or parks on a waypoint, or beside a leg other than the one it crosses
     last = route[-1]
     for a, b in zip(route[:-2], route[1:-1]):
         f = np.clip(np.dot(last - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
         assert np.linalg.norm(last - (a + f * (b - a))) >= END_CLEARANCE_M
     for crossing, ob in zip(ep.crossings, ep.scenario["world"]["obstacles"]):
         assert crossing["predicted_s"] >= MIN_CROSSING_S and ob["start_delay_s"] >= 0.0
-        parked = np.array(ob["start_ned_m"])
-        assert np.min(np.linalg.norm(route[:, :2] - parked[:2], axis=1)) >= SPAWN_CLEARANCE_M
+        for parked in (np.array(ob["start_ned_m"]), np.array(ob["waypoints_ned_m"][-1])):
+            assert np.min(np.linalg.norm(route[:, :2] - parked[:2], axis=1)) >= SPAWN_CLEARANCE_M
+            for k, (a, b) in enumerate(zip(route[:-1, :2], route[1:, :2])):
+                f = np.clip(np.dot(parked[:2] - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+                assert k == crossing["leg"] or np.linalg.norm(parked[:2] - (a + f * (b - a))) >= SPAWN_CLEARANCE_M
 
 
 def test_that_the_autopilot_reaches_each_waypoint_when_the_generator_predicts_it(tmp_path):

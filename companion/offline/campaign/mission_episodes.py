@@ -15,7 +15,7 @@ re-run by its index alone. An episode is what an operator uploads and what cross
   degrees, 0.5 to 2 m/s, timed to be there when the autopilot is predicted there (its
   cruise along the legs from :data:`START_S`, :data:`CORNER_S` a waypoint) give or take
   :data:`TIMING_SPREAD_S`: some meet it, some pass ahead or behind; none before
-  :data:`MIN_CROSSING_S`, none parked near a waypoint (:func:`_crossing`). One in three reports by
+  :data:`MIN_CROSSING_S`, none parked near a waypoint or beside another leg (:func:`_crossing`). One in three reports by
   ADS-B through the autopilot, the others on the obstacle link (ODOMETRY).
 
 Planner, estimator and companion settings are the shipped survey's (``configs/mission_survey.toml``:
@@ -107,6 +107,15 @@ def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(p - (a + f * ab)))
 
 
+def _parked_clearance(route: np.ndarray, leg: int, p: np.ndarray) -> float:
+    """How far (m, horizontally) an aircraft crossing leg ``leg`` of ``route`` parks at ``p`` from
+    the route's points and from every other leg."""
+    flat = route[:, :2]
+    near = float(np.min(np.linalg.norm(flat - p[:2], axis=1)))
+    others = [_segment_distance(p[:2], flat[k], flat[k + 1]) for k in range(len(flat) - 1) if k != leg]
+    return min([near, *others])
+
+
 def _route(rng: np.random.Generator, start: np.ndarray, tries: int = 200) -> np.ndarray:
     """The start and the waypoints (K + 1, 3), redrawn until the last waypoint is at least
     :data:`END_CLEARANCE_M` from every earlier leg: the referee's goal is the last waypoint, which
@@ -124,12 +133,15 @@ def _route(rng: np.random.Generator, start: np.ndarray, tries: int = 200) -> np.
 
 
 def _crossing(rng: np.random.Generator, route: np.ndarray, leg_start_s: np.ndarray, cruise: float, tries: int = 200):
-    """One aircraft's crossing: (leg, point, predicted time there, timing offset, direction, speed, run-up m).
+    """One aircraft's crossing: (leg, point, predicted time there, timing offset, direction, speed,
+    run-up m), or None after ``tries`` draws.
 
     Redrawn until the autopilot is predicted there at least :data:`MIN_CROSSING_S` into the run
-    (the guard has a horizon to see it come) and the aircraft waits for its start at least
-    :data:`SPAWN_CLEARANCE_M` from the drone's start and from every waypoint (a parked aircraft
-    must not sit on one)."""
+    (the guard has a horizon to see it come) and the aircraft waits for its start, and parks at
+    its end, at least :data:`SPAWN_CLEARANCE_M` from the drone's start, from every waypoint and
+    from every other leg: a parked aircraft must not sit on a waypoint, nor launch from beside a
+    leg as the drone flies it (the tracker's model of traffic that hardly manoeuvres cannot
+    foresee a start from rest, and no guard could avoid it)."""
     for _ in range(tries):
         leg = int(rng.integers(len(route) - 1))
         a, b = route[leg], route[leg + 1]
@@ -141,17 +153,16 @@ def _crossing(rng: np.random.Generator, route: np.ndarray, leg_start_s: np.ndarr
         direction = _unit(heading + math.radians(rng.uniform(45.0, 135.0)) * rng.choice((-1.0, 1.0)))
         speed = float(rng.uniform(*TRAFFIC_SPEED_MPS))
         run_up = speed * float(rng.uniform(*LEAD_S))
-        parked = point - run_up * direction
-        if there < MIN_CROSSING_S or np.min(np.linalg.norm(route[:, :2] - parked[:2], axis=1)) < SPAWN_CLEARANCE_M:
+        if there < MIN_CROSSING_S or any(_parked_clearance(route, leg, end) < SPAWN_CLEARANCE_M
+                                         for end in (point - run_up * direction, point + run_up * direction)):
             continue
         return leg, point, there, offset, direction, speed, run_up
-    raise RuntimeError(f"could not place a crossing after {tries} draws (mission geometry too tight)")
+    return None   # the mission's geometry leaves no room: the caller draws another
 
 
-def generate_mission(seed: int, index: int, *, c_min: float = 0.90) -> MissionEpisode:
-    """Draw episode ``index`` of a mission campaign with ``seed`` (see the module docstring)."""
-    rng = np.random.default_rng([int(seed), int(index), MISSION_STREAM])
-    start = np.array([0.0, 0.0, ALTITUDE_M])
+def _draw(rng: np.random.Generator, start: np.ndarray):
+    """One draw of the mission, its fence and its traffic: (route, cruise, fence, predicted times at
+    the waypoints, obstacles, crossings), or None when an aircraft found no crossing on it."""
     route = _route(rng, start)
     waypoints = route[1:]
     cruise = float(rng.uniform(*CRUISE_MPS))
@@ -169,7 +180,10 @@ def generate_mission(seed: int, index: int, *, c_min: float = 0.90) -> MissionEp
     before = np.concatenate([[START_S], at[:-1] + CORNER_S])      # when each leg starts
     obstacles, crossings = [], []
     for k in range(int(rng.integers(TRAFFIC[0], TRAFFIC[1] + 1))):
-        leg, point, there, offset, direction, speed, run_up = _crossing(rng, route, before, cruise)
+        found = _crossing(rng, route, before, cruise)
+        if found is None:
+            return None
+        leg, point, there, offset, direction, speed, run_up = found
         adsb = bool(rng.random() < ADSB_SHARE)
         ob = {"name": f"crossing-{k + 1}", "radius_m": float(rng.uniform(*RADIUS_RANGE_M)),
               "start_ned_m": (point - run_up * direction).tolist(),
@@ -183,6 +197,23 @@ def generate_mission(seed: int, index: int, *, c_min: float = 0.90) -> MissionEp
         obstacles.append(ob)
         crossings.append({"leg": leg, "point_ned_m": point.tolist(), "predicted_s": there, "offset_s": offset,
                           "transport": ob["transport"]})
+    return route, cruise, fence, at, obstacles, crossings
+
+
+def generate_mission(seed: int, index: int, *, c_min: float = 0.90, tries: int = 50) -> MissionEpisode:
+    """Draw episode ``index`` of a mission campaign with ``seed`` (see the module docstring): the
+    mission, fence and traffic are drawn again, from the same stream, until every aircraft has a
+    crossing (:func:`_crossing`)."""
+    rng = np.random.default_rng([int(seed), int(index), MISSION_STREAM])
+    start = np.array([0.0, 0.0, ALTITUDE_M])
+    for _ in range(tries):
+        drawn = _draw(rng, start)
+        if drawn is not None:
+            break
+    else:
+        raise RuntimeError(f"could not draw mission episode {index} of seed {seed} after {tries} draws")
+    route, cruise, fence, at, obstacles, crossings = drawn
+    waypoints = route[1:]
 
     duration = float(at[-1] * 1.5 + 30.0)
     plan = plan_document(waypoints, origin=ORIGIN, takeoff_alt_m=None, final=None, acceptance_m=ACCEPTANCE_M,
@@ -198,7 +229,7 @@ def generate_mission(seed: int, index: int, *, c_min: float = 0.90) -> MissionEp
                     "c_min": float(c_min), "velocity_max_mps": [3.0, 3.0, 1.0], "accel_max_mps2": [0.5, 0.5, 0.5],
                     "velocity_time_constant_s": 0.3, "sensing_range_m": 10.0, "weight_progress": 0.3},
         "estimator": {"drone": {"accel_noise_psd_m2ps3": 0.5}, "tracker": {"accel_noise_psd_m2ps3": 0.01}},
-        "companion": {"setpoint_rate_hz": 20.0, "obstacle_radius_m": RADIUS_RANGE_M[1]},
+        "companion": {"setpoint_rate_hz": 20.0, "obstacle_radius_m": RADIUS_RANGE_M[1], "brake_accel_mps2": 2.0},
         "traffic": {"autopilot_link_kinds": ["ADSB_VEHICLE"], "position_std_m": 1.0, "vertical_std_m": 1.0,
                     "velocity_std_mps": 1.0},
         "sim": {"velocity_time_constant_s": 0.3, "accel_max_mps2": 4.0,
