@@ -238,15 +238,30 @@ class MissionGoal:
         it flies them: the first waypoint at or after that item, then the next ones, a DO_JUMP with
         jumps left followed once (a patrol's next lap; each waypoint at most twice). Empty once the
         current item is past the last waypoint (a landing, a return: the path holds where it is)."""
+        return self._route_and_speeds(current_seq, 1.0)[0]
+
+    def autopilot_path(self, current_seq: int, position: np.ndarray, default_mps: float,
+                       climb_mps: float) -> tuple[np.ndarray, np.ndarray]:
+        """What the autopilot flies from its current item ``current_seq`` for a vehicle at ``position``
+        (NED m): the points (K, 3) and its speed on the leg to each (m/s, (K,)). On the mission's
+        NAV_TAKEOFF the climb first (:meth:`climb_route`), else the waypoints (:meth:`route_from` at
+        :meth:`route_speeds`); empty past the last waypoint."""
+        route, speeds = self.climb_route(current_seq, position, climb_mps, default_mps)
+        if len(route):
+            return route, speeds
+        return self._route_and_speeds(current_seq, default_mps)
+
+    def _route_and_speeds(self, current_seq: int, default_mps: float) -> tuple[np.ndarray, np.ndarray]:
         order = self._route_order(current_seq)
-        return np.array([self.waypoints[k].position for k in order], dtype=float).reshape(-1, 3)
+        route = np.array([self.waypoints[k].position for k in order], dtype=float).reshape(-1, 3)
+        speeds = [self.waypoints[k].speed_mps for k in order]
+        return route, np.array([default_mps if v is None else v for v in speeds], dtype=float)
 
     def route_speeds(self, current_seq: int, default_mps: float) -> np.ndarray:
         """The autopilot's speed on each leg of :meth:`route_from` (m/s, (K,)): the one its mission's
         DO_CHANGE_SPEED items set before the leg's waypoint, else ``default_mps``. (After a DO_JUMP
         the speed is that of the waypoint's first pass.)"""
-        speeds = [self.waypoints[k].speed_mps for k in self._route_order(current_seq)]
-        return np.array([default_mps if v is None else v for v in speeds], dtype=float)
+        return self._route_and_speeds(current_seq, default_mps)[1]
 
     def climb_route(self, current_seq: int, position: np.ndarray, climb_mps: float,
                     default_mps: float) -> tuple[np.ndarray, np.ndarray]:
@@ -258,8 +273,7 @@ class MissionGoal:
         if self.takeoff is None or current_seq != self.takeoff[0]:
             return np.empty((0, 3)), np.empty(0)
         top = self.takeoff[1]
-        route = self.route_from(current_seq + 1)
-        speeds = self.route_speeds(current_seq + 1, default_mps)
+        route, speeds = self._route_and_speeds(current_seq + 1, default_mps)
         first = float(speeds[0]) if len(speeds) else default_mps
         above = np.array([position[0], position[1], top[2]], dtype=float)
         return (np.vstack([above, top, route]).reshape(-1, 3),

@@ -190,19 +190,12 @@ class MissionWatch:
 
     def _route(self, from_seq: int | None, position: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | float]:
         """The autopilot's path ahead from item ``from_seq`` for a vehicle at ``position`` (NED m): the
-        points it flies through and its speed on each leg to them (m/s); None when no route is known.
-        On the mission's NAV_TAKEOFF: the climb where it is, then the item and the waypoints."""
-        goal, default = self.builder.goal, self.mission.autopilot_speed_mps
-        route_from = getattr(goal, "route_from", None)
-        if route_from is None or from_seq is None:
-            return None, default
-        climb_route = getattr(goal, "climb_route", None)
-        if climb_route is not None:
-            route, speeds = climb_route(from_seq, position, self.mission.autopilot_climb_mps, default)
-            if len(route):
-                return route, speeds
-        route_speeds = getattr(goal, "route_speeds", None)
-        return route_from(from_seq), (default if route_speeds is None else route_speeds(from_seq, default))
+        points it flies through and its speed on each leg to them (m/s); None when no item is known
+        (:meth:`~companion.loop.mission_goal.MissionGoal.autopilot_path`)."""
+        if from_seq is None:
+            return None, self.mission.autopilot_speed_mps
+        return self.builder.goal.autopilot_path(from_seq, position, self.mission.autopilot_speed_mps,
+                                                self.mission.autopilot_climb_mps)
 
     def _fence_step(self, path: np.ndarray, drone_covs: np.ndarray) -> int | None:
         """The first step of ``path`` at which the drone's body and ``c_min`` ellipsoid would reach
