@@ -144,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
             logging.getLogger(name).setLevel(logging.ERROR)
     if args.family == "swap":
         return _run_swap(args)
+    if args.save_scenario and args.episode is None:
+        raise ConfigError("--save-scenario needs --episode I (which episode to save)")
     if args.family == "mission":
         return _run_mission(args)
     if args.drones is not None:
@@ -155,8 +157,6 @@ def run(args: argparse.Namespace) -> int:
         elsewhere = "a coordination mode (for --family swap)" if wrong[0] in COORDINATION_MODES else "for --family mission"
         raise ConfigError(f"--methods: {wrong[0]} is {elsewhere}; the {args.family} family's methods are "
                           f"{', '.join(METHODS)}")
-    if args.save_scenario and args.episode is None:
-        raise ConfigError("--save-scenario needs --episode I (which episode to save)")
     episodes = [args.episode] if args.episode is not None else range(args.episodes)
     if args.save_scenario:
         path = write_scenario(generate_scenario(args.family, args.seed, args.episode, c_min=args.c_min,
@@ -256,8 +256,6 @@ def _run_mission(args: argparse.Namespace) -> int:
         if used:
             raise ConfigError(f"{flag} is not available with --family mission (each mission sets its own length)"
                               if flag == "--duration" else f"{flag} is not available with --family mission")
-    if args.save_scenario and args.episode is None:
-        raise ConfigError("--save-scenario needs --episode I (which episode to save)")
     if args.save_scenario:
         ep = generate_mission(args.seed, args.episode, c_min=args.c_min)
         scenario = Path(args.save_scenario)
