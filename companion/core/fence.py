@@ -39,6 +39,8 @@ import numpy as np
 
 #: Sides of the regular polygon an inclusion circle is flown as (inscribed).
 CIRCLE_SIDES = 16
+#: A corner of the way round counts as reached within this fraction of the router's margin.
+REACHED_FRACTION = 0.5
 _EPS = 1e-9
 
 
@@ -238,7 +240,8 @@ class FenceRouter:
         position|`` ahead. It is kept while the straight line to it is free and passes the
         margin off every exclusion zone; else the way is the shortest path to the goal (the
         target may lie inside a zone, the goal may not), and the new target is the point as far
-        along it if that is in sight so, else the path's first corner.
+        along it if that is in sight so, else the path's first corner the drone has not reached
+        (within :data:`REACHED_FRACTION` of the margin): a drone at a corner goes on to the next.
         """
         p, t = np.asarray(position, dtype=float), np.asarray(target, dtype=float)
         if self.visible(p[:2], t[:2], self.margin_m):
@@ -255,7 +258,10 @@ class FenceRouter:
                 ahead = a + (b - a) * (left / max(seg, _EPS))
                 break
             left -= seg
-        q = ahead if self.visible(p[:2], ahead, self.margin_m) else path[1]
+        if self.visible(p[:2], ahead, self.margin_m):
+            q = ahead
+        else:   # the path's first corner not yet reached (at a corner, the next: else it holds the drone there)
+            q = next((c for c in path[1:] if np.linalg.norm(c - p[:2]) > REACHED_FRACTION * self.margin_m), path[-1])
         return np.array([q[0], q[1], t[2]])
 
 

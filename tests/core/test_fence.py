@@ -8,6 +8,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from companion.core.fence import (CIRCLE_SIDES, CircleZone, Fence, PolygonZone, point_in_polygon, polygon_walls)
+from companion.loop.goal import route_target
 
 
 def _star(seed: int, n: int) -> np.ndarray:
@@ -74,3 +75,53 @@ def test_clearance_is_signed_by_the_breach():
 def test_degenerate_polygons_are_refused(vertices):
     with pytest.raises(ValueError):
         PolygonZone(vertices, True)
+
+
+def _follow(fence: Fence, start, goal, margin_m: float = 1.4, step_m: float = 0.3, steps: int = 600, at=None):
+    """A point that moves ``step_m`` a step toward the router's target, the target taken 12 m ahead on
+    the leg from ``start`` to ``goal`` (a mission leg's, :func:`route_target`): the points it passed
+    and whether it got there; from ``at`` (default: the leg's start)."""
+    router = fence.router(margin_m)
+    leg = np.array([*start, -5.0])
+    p, goal = np.array([*(start if at is None else at), -5.0]), np.array([*goal, -5.0])
+    passed = [p[:2].copy()]
+    for _ in range(steps):
+        if np.linalg.norm(goal - p) < 0.05:
+            return passed, True
+        t = router.target(p, route_target(leg, goal, p, 12.0), goal)
+        d = t - p
+        p = p + d * min(1.0, step_m / max(np.linalg.norm(d), 1e-12))
+        passed.append(p[:2].copy())
+    return passed, False
+
+
+def test_the_router_leads_round_a_building_the_leg_grazes_to_the_waypoint():
+    """Mission campaign seed 1 episode 124: the last leg grazes a building's far edge. The drone
+    reached the first corner of the way round and stayed there 28 s: the router kept giving that
+    corner while the next one was not in sight with the margin."""
+    building = np.array([[-28.1, -17.2], [-32.1, -18.0], [-31.3, -21.9], [-27.3, -21.2]])
+    fence = Fence(polygons=(PolygonZone(np.array([[-47.1, -28.1], [-47.1, 12.5], [6.4, 12.5], [6.4, -28.1]]), True),
+                            PolygonZone(building, False)))
+    margin = 0.434 + 1.0                                      # the drone's radius + 1 m
+    corner = fence.router(margin).nodes[3]                    # where it stayed: (-25.6, -22.3)
+    assert np.linalg.norm(corner - [-25.6, -22.3]) < 0.1     # (the vertices rounded to 0.1 m)
+    for at in (None, corner):
+        passed, arrived = _follow(fence, (-21.9, -18.0), (-40.7, -21.7), margin_m=margin, at=at)
+        assert arrived
+        assert all(not point_in_polygon(building, q) for q in passed)
+
+
+@settings(max_examples=40, deadline=None)
+@given(side=st.floats(4.0, 6.0), turn=st.floats(0.0, np.pi / 2), offset=st.floats(-1.0, 1.0), along=st.floats(0.35, 0.65))
+def test_the_router_leads_round_any_building_across_a_leg(side, turn, offset, along):
+    """A square building of 4 to 6 m, any way turned, across a 25 m leg within 1 m of its line (the
+    mission campaign's): followed, the router's targets take the drone round it to the waypoint."""
+    start, goal = np.array([0.0, 0.0]), np.array([25.0, 0.0])
+    centre = np.array([25.0 * along, offset])
+    c, s = np.cos(turn), np.sin(turn)
+    square = centre + 0.5 * side * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) @ np.array([[c, s], [-s, c]])
+    fence = Fence(polygons=(PolygonZone(np.array([[-8.0, -12.0], [33.0, -12.0], [33.0, 12.0], [-8.0, 12.0]]), True),
+                            PolygonZone(square, False)))
+    passed, arrived = _follow(fence, start, goal)
+    assert arrived
+    assert all(not point_in_polygon(square, q) for q in passed)
