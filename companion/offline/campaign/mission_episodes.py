@@ -9,7 +9,8 @@ re-run by its index alone. An episode is what an operator uploads and what cross
   a DO_CHANGE_SPEED first, 2 to 3 m/s (the autopilot's cruise, which the guard reads from
   the mission: ``[mission] autopilot_speed_mps`` is left at its default);
 - **the geofence**: an inclusion rectangle 5 to 8 m round the route and, in
-  :data:`BUILDING_SHARE` of episodes, a building (an exclusion square of 4 to 6 m) across
+  :data:`BUILDING_SHARE` of episodes, a building (an exclusion square of 4 to 6 m, at least
+  :data:`BUILDING_CLEARANCE_M` from the start and every waypoint) across
   one leg, 35 to 65 % along it and up to 1 m off its line: the autopilot alone flies into it;
 - **the traffic**: 1 to 3 aircraft, each across a random leg 25 to 75 % along it at 45 to 135
   degrees, 0.5 to 2 m/s, timed to be there when the autopilot is predicted there (its
@@ -29,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from companion.core.fence import Fence, PolygonZone
 from companion.loop.goal_frames import GeoPoint
 from companion.offline.campaign.generate import random_covariance
 from companion.offline.plan_document import plan_document
@@ -46,6 +48,10 @@ GOAL_TOLERANCE_M = 1.5
 FENCE_MARGIN_M = (5.0, 8.0)
 BUILDING_SHARE = 0.6
 BUILDING_SIDE_M = (4.0, 6.0)
+#: no building nearer the start or a waypoint than this (m): a waypoint beside a wall is not
+#: reached within its acceptance radius with the drone's body and c_min contour kept off the wall,
+#: and a mission starting beside one has the autopilot at the wall before OFFBOARD is in
+BUILDING_CLEARANCE_M = 4.0
 TRAFFIC = (1, 3)
 TRAFFIC_SPEED_MPS = (0.5, 2.0)
 ADSB_SHARE = 1.0 / 3.0
@@ -174,7 +180,11 @@ def _draw(rng: np.random.Generator, start: np.ndarray):
         a, b = route[leg], route[leg + 1]
         across = np.array([-(b - a)[1], (b - a)[0], 0.0]) / np.linalg.norm((b - a)[:2])
         centre = a + rng.uniform(0.35, 0.65) * (b - a) + rng.uniform(-1.0, 1.0) * across
-        fence.append((_square(centre, b - a, float(rng.uniform(*BUILDING_SIDE_M))), False))
+        square = _square(centre, b - a, float(rng.uniform(*BUILDING_SIDE_M)))
+        building = Fence(polygons=(PolygonZone(square, False),))
+        if min(building.clearance(q) for q in route) < BUILDING_CLEARANCE_M:
+            return None
+        fence.append((square, False))
 
     at = predicted_times(start, waypoints, cruise)
     before = np.concatenate([[START_S], at[:-1] + CORNER_S])      # when each leg starts
