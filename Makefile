@@ -12,6 +12,9 @@ PX4_SITL_DIR ?= ../shared/px4-sitl
 # ArduCopter SITL (start-arducopter and arducopter-sitl.tar.gz, or the unpacked arducopter-sitl/; README
 # "Flying ArduPilot"); `make ardupilot-test` flies the companion against it (the tarball is unpacked to a temp dir).
 ARDUPILOT_SITL_DIR ?= ../shared/ardupilot-sitl
+# `make test` runs the default stage on this many pytest-xdist workers (CI's machine has two cores;
+# 0 runs it in one process). The real-time and SITL stages always run one test at a time.
+TEST_WORKERS ?= 2
 
 $(VPY):
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python 3.11 or newer is needed, found " + sys.version' 
@@ -32,7 +35,7 @@ demo: $(STAMP)
 	$(VENV)/bin/companion demo antipodal
 
 test: $(STAMP)
-	$(VENV)/bin/pytest -q --durations=15
+	$(VENV)/bin/pytest -q -n $(TEST_WORKERS) --durations=15
 
 bench: $(BSTAMP)
 	$(VPY) -m tests.benchmarks

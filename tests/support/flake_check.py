@@ -41,6 +41,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 #: The stages of ``.ci/run`` that fly in wall-clock time, as pytest arguments, and the quarantine.
 STAGES: dict[str, list[str]] = {
+    "default": ["-n", "2"],   # `make test`: the lockstep and loopback tests on two xdist workers
     "realtime": ["-m", "realtime and not quarantine"],
     "px4": ["-s", "-m", "px4 and not quarantine", "tests/px4"],
     "quarantine": ["-m", "quarantine"],
