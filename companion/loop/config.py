@@ -233,6 +233,10 @@ class LoopConfig:
         arrival delays (:meth:`companion.loop.app.Companion.plan_lead_s`).
     timesync_hz : rate of the TIMESYNC requests that measure the autopilot's clock, Hz, in [0, 50];
         0 maps it from pose arrival times only (:mod:`companion.loop.vehicle_clock`).
+    vehicle_clock : how the autopilot's clock is mapped onto link time: ``"arrivals"`` (default)
+        the pose arrivals of the last 0.5 s less the latency TIMESYNC measures
+        (:mod:`companion.loop.vehicle_clock`); ``"timesync_line"`` as companions before
+        8 December 2026 did, to replay their logs exactly (:mod:`companion.loop.vehicle_clock_line`).
     drift_window_s : window over which the autopilot's position estimate is compared with its
         own velocity (:class:`estimator.drift.PositionDrift`), s, in [0, 10]; 0 (default) off.
         When on, the planner plans in the estimate's position rate: ``V_0`` is the velocity
@@ -269,6 +273,7 @@ class LoopConfig:
     max_constrained_tracks: int = 8
     setpoint_kind: str = "velocity"
     timesync_hz: float = 2.0
+    vehicle_clock: str = "arrivals"
     plan_lead_max_s: float = 0.25
     drift_window_s: float = 0.0
     response_state: str = "steady"
@@ -284,6 +289,7 @@ class LoopConfig:
         check.choice("setpoint_kind", self.setpoint_kind, ("velocity", "position_velocity"))
         check.choice("initial_velocity", self.initial_velocity, ("plan", "estimate"))
         check.choice("response_state", self.response_state, ("steady", "observed"))
+        check.choice("vehicle_clock", self.vehicle_clock, ("arrivals", "timesync_line"))
         if self.response_state == "observed" and self.setpoint_kind != "velocity":
             raise ConfigError(f"response_state = 'observed' needs setpoint_kind = 'velocity' (the observer "
                               f"models the autopilot's velocity loop), got {self.setpoint_kind!r}")

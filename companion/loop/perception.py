@@ -18,6 +18,7 @@ from companion.core.planner.response_observer import ResponseObserver
 from companion.core.planner.vehicle_model import ResponseModel
 from companion.loop.config import CompanionScenario
 from companion.loop.vehicle_clock import VehicleClock
+from companion.loop.vehicle_clock_line import TimesyncLineClock
 from companion.mavlink.messages import Key, PoseObservation
 from estimator import DroneFilter, ObstacleTracker, PositionDrift, Reason
 
@@ -56,7 +57,7 @@ class Perception:
         self.drift = PositionDrift(window) if window > 0.0 else None
         self.tracker = ObstacleTracker(scenario.tracker)
         #: Link time onto the autopilot's clock (pose arrivals, TIMESYNC answers).
-        self.clock = VehicleClock()
+        self.clock = VehicleClock() if scenario.companion.vehicle_clock == "arrivals" else TimesyncLineClock()
         self._uses_odometry = False
         self._ignored_keys: set[Key] = set()
         self._reset_counter: int | None = None

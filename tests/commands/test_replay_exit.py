@@ -51,14 +51,18 @@ def test_that_replay_times_count_from_the_log_start_not_the_clock_epoch(short_ho
     assert all(0.0 <= t <= summary["log_duration_s"] for t, _ in summary["events"])
 
 
-def test_that_a_real_time_log_replayed_without_the_flights_flags_exits_1_naming_them(capsys):
+def test_that_a_real_time_log_replayed_without_the_flights_flags_exits_1_naming_them(capsys, tmp_path):
     """The issue's case: a flight flown with ``--exit-after-goal`` (here ``demo --realtime``'s fly),
-    replayed without it, was called a success. Now exit 1, and the line names the flags to give."""
+    replayed without it, was called a success. Now exit 1, and the line names the flags to give.
+    The scenario maps the autopilot's clock as the flight's companion did (before 8 December 2026)."""
+    from tests.offline.test_replay_before_marks import short_hop_of_its_day
+
     log = ROOT / "tests" / "data" / "realtime_before_marks.tlog"
-    assert main(["replay", str(log), "--scenario", str(SHORT_HOP)]) == 1
+    scenario = short_hop_of_its_day(tmp_path)
+    assert main(["replay", str(log), "--scenario", str(scenario)]) == 1
     last = capsys.readouterr().err.splitlines()[-1]
     assert last.startswith("companion replay: not reproduced: 140 of 140 recorded commands compared")
     assert last.endswith("give the replay the scenario and the flags the flight used "
                          "(--arm, --takeoff-alt, --exit-after-goal, --formulation, --target-system, --goal or "
                          "--mission, --fence)")
-    assert main(["replay", str(log), "--scenario", str(SHORT_HOP), "--exit-after-goal", "1"]) == 0
+    assert main(["replay", str(log), "--scenario", str(scenario), "--exit-after-goal", "1"]) == 0

@@ -10,7 +10,9 @@ change (commit dba2e14):
 
 - ``tests/data/realtime_before_marks.tlog``: ``companion demo tests/data/short_hop.toml
   --realtime --out ...`` (mavsim and ``companion fly`` over loopback UDP, the planner in its
-  own process; the companion's tlog, 130 KB);
+  own process; the companion's tlog, 130 KB), replayed with the clock mapping of its day
+  (``[companion] vehicle_clock = "timesync_line"``: today's maps mavsim's clock a fraction of a
+  millisecond differently, and the flight's plans differ from the first that does);
 - ``tests/data/scripted_before_marks.tlog``: :func:`tests.support.scripted_realtime.record`
   (run_realtime on a virtual clock against a scripted PX4, one job in four lost, a
   signature rejected every half second; 19 KB).
@@ -32,18 +34,26 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 SHORT_HOP = DATA / "short_hop.toml"
 
 
+def short_hop_of_its_day(tmp_path: Path) -> Path:
+    """SHORT_HOP with the autopilot's clock mapped as companions before 8 December 2026 did
+    (``[companion] vehicle_clock = "timesync_line"``): the clock mapping of the day these logs were flown."""
+    path = tmp_path / "short_hop_timesync_line.toml"
+    path.write_text(SHORT_HOP.read_text() + '\n[companion]\nvehicle_clock = "timesync_line"\n')
+    return path
+
+
 def _bookkeeping(path: Path) -> Counter:
     """The companion's NAMED_VALUE_FLOAT / NAMED_VALUE_INT in a tlog, by (type, name)."""
     return Counter((m.get_type(), m.name) for _, m in read_tlog(path)
                    if m.get_type() in ("NAMED_VALUE_FLOAT", "NAMED_VALUE_INT") and m.get_srcComponent() == 191)
 
 
-def test_that_a_realtime_log_from_before_the_marks_replays_every_command_exactly():
+def test_that_a_realtime_log_from_before_the_marks_replays_every_command_exactly(tmp_path):
     path = DATA / "realtime_before_marks.tlog"
     kinds = _bookkeeping(path)
     assert kinds[("NAMED_VALUE_FLOAT", "plan_seq")] == 15 and kinds[("NAMED_VALUE_INT", "plan_in")] == 0  # the old format
     offboard = dataclasses.replace(load_scenario(SHORT_HOP).offboard, hold_after_goal_s=1.0)  # demo --realtime: fly --exit-after-goal 1
-    res = replay(path, SHORT_HOP, offboard=offboard)
+    res = replay(path, short_hop_of_its_day(tmp_path), offboard=offboard)
     assert res.mode == "compare"
     assert any("before the plan marks" in note for note in res.notes), res.notes
     assert res.commands_compared == res.commands_recorded == 140

@@ -14,7 +14,9 @@ differ in what they announced, not in what they commanded: the old companion sai
 "obstacles: 3 rejected ..." for reports before its clock was mapped, which today's keeps as
 early reports (commit 6a2d573). It handed back one second after its goal wherever the
 vehicle was; today's waits for the vehicle to settle at the goal unless ``[offboard]
-goal_settle_max_s = 0``, which the replay's scenario sets as that flight had it.
+goal_settle_max_s = 0``, which the replay's scenario sets as that flight had it. Its clock
+mapping is set the same way (``[companion] vehicle_clock = "timesync_line"``, the mapping of
+companions before 8 December 2026): today's differs by 0.013 m/s at most in this flight's commands.
 """
 
 from __future__ import annotations
@@ -33,9 +35,11 @@ FLAGS = ["--arm", "--takeoff-alt", "5", "--exit-after-goal", "1", "--json"]
 
 
 def _scenario(tmp_path: Path) -> Path:
-    """configs/antipodal_px4.toml with the hand-back rule of the flight's day (``goal_settle_max_s = 0``)."""
+    """configs/antipodal_px4.toml with the hand-back rule and the clock mapping of the flight's day
+    (``goal_settle_max_s = 0``, ``vehicle_clock = "timesync_line"``)."""
     data = read_scenario_toml(REPO / "configs" / "antipodal_px4.toml")
     data["offboard"] = {**data.get("offboard", {}), "goal_settle_max_s": 0.0}
+    data["companion"] = {**data["companion"], "vehicle_clock": "timesync_line"}
     path = tmp_path / "antipodal_px4.toml"
     path.write_text(to_toml(data))
     return path
