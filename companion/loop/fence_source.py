@@ -8,8 +8,13 @@ the planner its walls about each plan's start (:meth:`companion.core.fence.Fence
 
 ``--fence vehicle`` (:meth:`FenceSource.from_vehicle`) downloads the fence stored on the
 autopilot first (the mission protocol with mission type FENCE, as a ground station reads it;
-:func:`zones_from_items`), then places it the same way; a vehicle holding no fence, or a
-download that fails, ends the run with one error before anything is flown.
+:func:`zones_from_items`), then reads the parameters of its failsafe fence about home where
+the autopilot has them (PX4's GF_MAX_HOR_DIST and GF_MAX_VER_DIST,
+:attr:`~companion.mavlink.autopilots.base.Autopilot.fence_params`), and places it all the
+same way: the largest distance from home as an inclusion circle about HOME_POSITION's local
+position, the largest height above home as a ceiling. A vehicle holding no fence (no zone and
+no limit), or a download or parameter read that fails, ends the run with one error before
+anything is flown.
 
 Until the origin is known the offboard sequence is held at its start, as for a goal that
 must be placed (:class:`companion.loop.goal_stage.GoalStage`): nothing is armed or flown
@@ -31,7 +36,9 @@ from companion.core.fence import CircleZone, Fence, PolygonZone
 from companion.errors import ConfigError
 from companion.loop.goal import Preparation
 from companion.loop.mission_file import FenceCircle, FencePolygon, MissionPlan
+from companion.mavlink.autopilots.base import FenceLimits
 from companion.mavlink.mission_protocol import DOWNLOAD_REPLIES, FENCE, MissionDownload, MissionItem
+from companion.mavlink.param_read import ParamRead
 from companion.loop.vehicle_reference import VehicleReference
 
 logger = logging.getLogger(__name__)
@@ -68,6 +75,11 @@ class FenceSource:
         #: the fence in the local frame (None until placed)
         self.fence: Fence | None = None
         self.failed: str | None = None
+        #: the read of the autopilot's fence parameters (``from_vehicle``), while it runs and after
+        self.param_read: ParamRead | None = None
+        #: the autopilot's fence about home (``from_vehicle``; none from a file)
+        self.limits = FenceLimits()
+        self._limits_due = plan is None               # the vehicle's fence: its limits are read after its zones
         self._wait_from: float | None = None
         self._router = None
 
@@ -78,45 +90,96 @@ class FenceSource:
 
     @property
     def n_zones(self) -> int:
-        return 0 if self.plan is None else len(self.plan.polygons) + len(self.plan.circles)
+        zones = 0 if self.plan is None else len(self.plan.polygons) + len(self.plan.circles)
+        return zones + (self.limits.max_horizontal_m is not None)
 
     @property
     def downloading(self) -> bool:
         return self.transfer is not None and not self.transfer.over
 
-    def on_message(self, t_s: float, msg) -> list:
-        """The autopilot's MISSION_* messages while the download runs; the answers to send at once."""
-        return self.transfer.on_message(t_s, msg) if self.downloading else []
+    @property
+    def reading_params(self) -> bool:
+        return self.param_read is not None and not self.param_read.over
 
-    def prepare(self, t_s: float, autopilot: tuple[int, int] | None) -> Preparation:
-        """Download the fence if it is the vehicle's; place it once the origin is known; ask for
-        the origin and wait (bounded) until then."""
+    def takes(self, msg_type: str) -> bool:
+        """Whether a message of this type is the fence's now (its download's, its parameter read's)."""
+        return (self.downloading and msg_type in self.MISSION_MESSAGES) or (self.reading_params and msg_type == "PARAM_VALUE")
+
+    def on_message(self, t_s: float, msg) -> list:
+        """The autopilot's MISSION_* messages while the download runs, PARAM_VALUE while the
+        parameters are read; the answers to send at once."""
+        if self.downloading:
+            return self.transfer.on_message(t_s, msg)
+        if self.reading_params:
+            self.param_read.on_message(t_s, msg)
+        return []
+
+    def prepare(self, t_s: float, autopilot: tuple[int, int] | None, kind=None) -> Preparation:
+        """Download the fence and read its limits if it is the vehicle's (``kind``: the autopilot's
+        :class:`~companion.mavlink.autopilots.base.Autopilot`, once heard); place it once the origin
+        (and, for limits about home, home) is known; ask for them and wait (bounded) until then."""
         if self.fence is not None:
             return Preparation(True)
         if self.failed is not None:
             return Preparation(False)
         if self.plan is None:
             return self._download(t_s, autopilot)
+        if self._limits_due:
+            return self._read_limits(t_s, autopilot, kind)
         origin = self.reference.origin_point
-        if origin is not None:
+        home = self.reference.home
+        if origin is not None and (home is not None or not self.limits.any):
             try:
-                self.fence = place_fence(self.plan, origin.lat_deg, origin.lon_deg)
+                self.fence = place_fence(self.plan, origin.lat_deg, origin.lon_deg, self.limits,
+                                         None if home is None else home.local_ned_m)
             except ValueError as exc:
                 return self._fail(f"{self.source}: {exc}", "companion: fence not usable, not flown")
-            text = f"companion: fence of {self.n_zones} zones placed"
+            text = f"companion: fence of {self.n_zones} zone{'' if self.n_zones == 1 else 's'} placed" + (
+                f", ceiling {self.limits.max_up_m:g} m above home" if self.limits.max_up_m is not None else "")
             logger.info("%s (%d walls)", text, self.fence.n_walls)
             return Preparation(True, [(mavlink2.MAV_SEVERITY_INFO, text)])
         if autopilot is None:
             return Preparation(False)
-        self.reference.origin_request.wanted = True
+        waits_for = "GPS_GLOBAL_ORIGIN" if origin is None else "HOME_POSITION"
+        (self.reference.origin_request if origin is None else self.reference.home_request).wanted = True
         if self._wait_from is None:
             self._wait_from = t_s
-            return Preparation(False, [(mavlink2.MAV_SEVERITY_NOTICE, "companion: fence waits for GPS_GLOBAL_ORIGIN")])
+            return Preparation(False, [(mavlink2.MAV_SEVERITY_NOTICE, f"companion: fence waits for {waits_for}")])
         if t_s - self._wait_from >= self.wait_s - 1e-9:
-            self.reference.origin_request.wanted = False
-            return self._fail(f"{self.source}: fence not placed: no GPS_GLOBAL_ORIGIN from the autopilot after "
-                              f"{self.wait_s:g} s (does it have a position fix?)", "companion: fence not placed, no origin")
+            self.reference.origin_request.wanted = self.reference.home_request.wanted = False
+            return self._fail(f"{self.source}: fence not placed: no {waits_for} from the autopilot after "
+                              f"{self.wait_s:g} s (does it have a position fix?)", "companion: fence not placed, no "
+                              + ("origin" if origin is None else "home"))
         return Preparation(False)
+
+    def _read_limits(self, t_s: float, autopilot: tuple[int, int] | None, kind) -> Preparation:
+        """The autopilot's fence about home, from its parameters (none for an autopilot that names none)."""
+        if autopilot is None or kind is None:
+            return Preparation(False)
+        names = tuple(getattr(kind, "fence_params", ()))
+        if not names:                                  # an autopilot whose fence parameters are not read
+            self._limits_due = False
+            return self._no_zones_check()
+        if self.param_read is None:
+            self.param_read = ParamRead(autopilot, names)
+            return Preparation(False, send=self.param_read.start(t_s))
+        send = self.param_read.step(t_s)
+        if self.param_read.failed is not None:
+            return self._fail(f"the vehicle's fence: {', '.join(names)} not read: {self.param_read.failed}",
+                              "companion: fence parameters not read")
+        if not self.param_read.done:
+            return Preparation(False, send=send)
+        self.limits = kind.fence_limits(self.param_read.values)
+        self._limits_due = False
+        logger.info("the vehicle's fence about home: %s", self.limits)
+        return self._no_zones_check()
+
+    def _no_zones_check(self) -> Preparation:
+        assert self.plan is not None
+        if not self.plan.polygons and not self.plan.circles and not self.limits.any:
+            return self._fail("the vehicle holds no fence (--fence vehicle): upload one from the ground station",
+                              "companion: the vehicle holds no fence")
+        return Preparation(False)                      # placed from the next tick
 
     def _download(self, t_s: float, autopilot: tuple[int, int] | None) -> Preparation:
         if autopilot is None:
@@ -134,11 +197,8 @@ class FenceSource:
             polygons, circles = zones_from_items(self.transfer.items)
         except ValueError as exc:
             return self._fail(f"the vehicle's fence: {exc}", "companion: vehicle's fence not usable")
-        if not polygons and not circles:
-            return self._fail("the vehicle holds no fence (--fence vehicle): upload one from the ground station",
-                              "companion: the vehicle holds no fence")
         self.plan = MissionPlan(self.source, (), polygons=polygons, circles=circles)
-        return Preparation(False, send=send)          # placed from the next tick
+        return Preparation(False, send=send)          # its limits are read from the next tick
 
     def walls(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The fence's walls about ``position`` (NED m); none before it is placed."""
@@ -191,13 +251,24 @@ def zones_from_items(items: list[MissionItem]) -> tuple[tuple[FencePolygon, ...]
     return tuple(polygons), tuple(circles)
 
 
-def place_fence(plan: MissionPlan, lat0_deg: float, lon0_deg: float) -> Fence:
-    """A plan's geodetic fence in the local frame about the origin (lat0, lon0). Raises ValueError on a degenerate zone."""
+def place_fence(plan: MissionPlan, lat0_deg: float, lon0_deg: float, limits: FenceLimits = FenceLimits(),
+                home_ned_m: tuple[float, float, float] | None = None) -> Fence:
+    """A plan's geodetic fence in the local frame about the origin (lat0, lon0), with the autopilot's
+    ``limits`` about home (its local NED position ``home_ned_m``, m): an inclusion circle and a
+    ceiling. Raises ValueError on a degenerate zone."""
     polygons = tuple(PolygonZone(np.array([geo.project(lat, lon, lat0_deg, lon0_deg) for lat, lon in p.vertices]),
                                  p.inclusion) for p in plan.polygons)
     circles = tuple(CircleZone(np.array(geo.project(*c.center, lat0_deg, lon0_deg)), c.radius_m, c.inclusion)
                     for c in plan.circles)
-    return Fence(polygons=polygons, circles=circles)
+    ceiling = None
+    if limits.any:
+        if home_ned_m is None:
+            raise ValueError("the fence's limits about home need HOME_POSITION")
+        if limits.max_horizontal_m is not None:
+            circles += (CircleZone(np.array(home_ned_m[:2], dtype=float), limits.max_horizontal_m, True),)
+        if limits.max_up_m is not None:
+            ceiling = -float(home_ned_m[2]) + limits.max_up_m
+    return Fence(polygons=polygons, circles=circles, ceiling_up_m=ceiling)
 
 
 def scenario_fence(mission, reference: VehicleReference, plan: MissionPlan | None = None) -> FenceSource | None:

@@ -48,13 +48,13 @@ class GoalStage:
 
     def takes(self, msg_type: str) -> bool:
         """Whether a message of this type is the goal's or the fence's (a mission transfer's)."""
-        if self.fence is not None and self.fence.downloading and msg_type in self.fence.MISSION_MESSAGES:
+        if self.fence is not None and self.fence.takes(msg_type):
             return True
         return self._messages is not None and msg_type in self._messages
 
     def route(self, t_s: float, msg) -> Outbox:
-        """The goal's (or, while it downloads, the fence's) message at link time ``t_s``; what answers it at once."""
-        if self.fence is not None and self.fence.downloading:
+        """The goal's (or, while it downloads and reads, the fence's) message at link time ``t_s``; what answers it at once."""
+        if self.fence is not None and self.fence.takes(msg.get_type()):
             return self.fence.on_message(t_s, msg)
         return self.goal.on_message(t_s, msg)  # type: ignore[attr-defined]
 
@@ -70,7 +70,7 @@ class GoalStage:
         return [*sent, *(self.supervisor.say(t_s, severity, text) for severity, text in said)]
 
     def _prepare(self, t_s: float, autopilot) -> Outbox:
-        prep = self.fence.prepare(t_s, autopilot) if self.fence is not None else None
+        prep = self.fence.prepare(t_s, autopilot, getattr(self.sequencer, "kind", None)) if self.fence is not None else None
         if prep is None or prep.ready and not prep.said:     # the fence first, then the goal
             prep = self.goal.prepare(t_s, autopilot) if callable(getattr(self.goal, "prepare", None)) else Preparation(True)
         elif prep.ready:                                       # placed at this tick: said now, the goal next tick

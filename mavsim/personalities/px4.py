@@ -111,6 +111,11 @@ PARAMS: ParamTable = {
     "EKF2_NOAID_TOUT": (5000000, PARAM_TYPE_INT32, 500000, 10000000),   # us of dead reckoning allowed
     "NAV_ACC_RAD": (2.0, PARAM_TYPE_REAL32, 0.05, 200.0),     # a waypoint's default acceptance radius, m
     "NAV_MC_ALT_RAD": (0.8, PARAM_TYPE_REAL32, 0.05, 200.0),  # a mission altitude's acceptance, m
+    # the failsafe geofence about home (docs/PX4_FACTS.md, "Geofence"): its action, and its largest
+    # horizontal distance and height from home (m; 0 off)
+    "GF_ACTION": (2, PARAM_TYPE_INT32, 0, 5),
+    "GF_MAX_HOR_DIST": (0.0, PARAM_TYPE_REAL32, 0.0, 10000.0),
+    "GF_MAX_VER_DIST": (0.0, PARAM_TYPE_REAL32, 0.0, 10000.0),
 }
 
 #: Stream name -> default rate (Hz): PX4's on the offboard link.

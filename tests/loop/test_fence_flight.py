@@ -187,3 +187,49 @@ def test_a_goal_outside_the_fence_is_one_error_and_nothing_flown(tmp_path):
     assert c.goal_error is not None and c.goal_error.startswith("the goal at N 40.0 E 0.0 D -5.0 is 10.0 m outside the fence")
     assert c.sequencer.phase.name == "GAVE_UP" and not c.sequencer.state.engaged
     assert "companion: goal outside the fence" in [text for _, text in c.state.events]
+
+
+def test_px4s_fence_about_home_is_read_and_flown_inside(monkeypatch):
+    """GF_MAX_HOR_DIST and GF_MAX_VER_DIST of mavsim's PX4 (no fence items stored): read with
+    PARAM_REQUEST_READ and placed about HOME_POSITION as an inclusion circle and a ceiling."""
+    data = _scenario(None)
+    data["mission"]["fence_file"] = "vehicle"
+    data["sim"]["params"] = {"GF_MAX_HOR_DIST": 30.0, "GF_MAX_VER_DIST": 5.8}
+    run = run_lockstep(data, seed=0)
+    c = run.companion
+    texts = [text for _, text in c.state.events]
+    assert "companion: fence of 1 zone placed, ceiling 5.8 m above home" in texts, texts
+    assert c.fence.param_read.done and c.fence.param_read.resent == 0
+    fence = c.fence.fence
+    home = np.array(c.reference.home.local_ned_m)
+    assert fence.ceiling_up_m == pytest.approx(-home[2] + 5.8)
+    assert len(fence.circles) == 1 and fence.circles[0].radius_m == 30.0
+    assert np.allclose(fence.circles[0].center, home[:2])
+    heights = [-p[2] for _, p, _ in run.extra["replan_truth"]]
+    assert run.truth["goal_reached"] and max(heights) < -home[2] + 5.8 - c.planner_config.drone_radius_m + 0.05
+
+
+def test_a_goal_beyond_px4s_largest_distance_from_home_is_one_error_and_nothing_flown():
+    data = _scenario(None)
+    data["mission"]["fence_file"] = "vehicle"
+    data["sim"]["params"] = {"GF_MAX_HOR_DIST": 14.0}
+    data["scenario"]["duration_s"] = 6.0
+    run = run_lockstep(data, seed=0)
+    c = run.companion
+    assert c.goal_error is not None and "outside the fence" in c.goal_error, c.goal_error
+    assert not c.sequencer.state.engaged and run.truth["path_length_m"] < 0.5
+
+
+def test_a_vehicle_that_never_answers_the_fence_parameters_is_one_error_naming_them(monkeypatch):
+    import mavsim.autopilot
+
+    monkeypatch.setattr(mavsim.autopilot.Autopilot, "_on_param_request_read", lambda self, *args: [])
+    data = _scenario(None)
+    data["mission"]["fence_file"] = "vehicle"
+    data["scenario"]["duration_s"] = 8.0
+    run = run_lockstep(data, seed=0)
+    c = run.companion
+    assert c.goal_error == ("the vehicle's fence: GF_MAX_HOR_DIST, GF_MAX_VER_DIST not read: no PARAM_VALUE for "
+                            "GF_MAX_HOR_DIST, GF_MAX_VER_DIST after 5 requests 1 s apart"), c.goal_error
+    assert not c.sequencer.state.engaged and run.truth["path_length_m"] < 0.5
+    assert "companion: fence parameters not read" in [text for _, text in c.state.events]

@@ -30,7 +30,7 @@ from __future__ import annotations
 import enum
 
 from companion.errors import InputError
-from companion.mavlink.autopilots.base import MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, EngagementPlan, ModeRole
+from companion.mavlink.autopilots.base import MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, EngagementPlan, FenceLimits, ModeRole
 
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 
@@ -124,6 +124,12 @@ class ArduPilotAutopilot:
     #: ArduCopter keeps GUIDED when the stream stops: after 2 s of braking, braked to a stop, the
     #: companion hands back (LOITER).
     brake_hand_back_s: float | None = 2.0
+    #: ArduCopter's fence parameters (FENCE_ENABLE, FENCE_TYPE, FENCE_RADIUS, FENCE_ALT_MAX) are not
+    #: read yet: its circle and ceiling about home are not flown by the planner (docs/MISSIONS.md, Limits).
+    fence_params: tuple[str, ...] = ()
+
+    def fence_limits(self, values: dict[str, tuple[float, int]]) -> FenceLimits:
+        return FenceLimits()
 
     def ready(self, estimator_flags: int) -> bool:
         return ekf_ready(estimator_flags)

@@ -70,6 +70,26 @@ class EngagementPlan:
     takeoff_ends_by_height: bool = False
 
 
+@dataclass(frozen=True)
+class FenceLimits:
+    """An autopilot's failsafe fence about home, from its parameters: a cylinder.
+
+    Attributes
+    ----------
+    max_horizontal_m : float or None
+        The largest horizontal distance from home (m); None: no such limit.
+    max_up_m : float or None
+        The largest height above home (m); None: no such limit.
+    """
+
+    max_horizontal_m: float | None = None
+    max_up_m: float | None = None
+
+    @property
+    def any(self) -> bool:
+        return self.max_horizontal_m is not None or self.max_up_m is not None
+
+
 class Autopilot(Protocol):
     """One autopilot's HEARTBEAT identity, modes and mode requests."""
 
@@ -85,6 +105,12 @@ class Autopilot(Protocol):
     #: Seconds of braking (stale estimate, no valid plan) after which the companion hands the
     #: vehicle back when the scenario does not say (``[offboard] brake_hand_back_s``); None never.
     brake_hand_back_s: float | None
+    #: Parameters that hold its failsafe fence about home (read with the vehicle's fence,
+    #: :meth:`fence_limits`); empty when none are read.
+    fence_params: tuple[str, ...]
+
+    def fence_limits(self, values: dict[str, tuple[float, int]]) -> FenceLimits:
+        """Its fence about home from :attr:`fence_params`' values (name -> (PARAM_VALUE's value, type))."""
 
     def ready(self, estimator_flags: int) -> bool:
         """Whether the vehicle may be armed and commanded, from EKF_STATUS_REPORT ``flags``."""

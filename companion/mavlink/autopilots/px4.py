@@ -29,6 +29,7 @@ from companion.mavlink.autopilots.base import (
     MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
     MAV_MODE_FLAG_SAFETY_ARMED,
     EngagementPlan,
+    FenceLimits,
     ModeRole,
     is_vehicle_autopilot,
 )
@@ -187,6 +188,13 @@ class Px4Autopilot:
     engagement = EngagementPlan()
     #: PX4 leaves OFFBOARD by itself when the stream stops; the companion brakes and streams on.
     brake_hand_back_s: float | None = None
+    #: PX4's failsafe geofence about home: GF_MAX_HOR_DIST, GF_MAX_VER_DIST (m, 0 off; floats).
+    fence_params: tuple[str, ...] = ("GF_MAX_HOR_DIST", "GF_MAX_VER_DIST")
+
+    def fence_limits(self, values: dict[str, tuple[float, int]]) -> FenceLimits:
+        """GF_MAX_HOR_DIST from home horizontally, GF_MAX_VER_DIST up from home (m); 0 or less: off."""
+        hor, ver = (values.get(name, (0.0, 0))[0] for name in self.fence_params)
+        return FenceLimits(hor if hor > 0.0 else None, ver if ver > 0.0 else None)
 
     def ready(self, estimator_flags: int) -> bool:
         """PX4 is commanded as soon as it is heard (it refuses to arm until it can fly)."""
