@@ -286,13 +286,15 @@ class Autopilot:
 
     def _on_mission(self, msg, now_us, veh, estimate):
         """The mission protocol: :class:`mavsim.missions.MissionStore` stores and serves the items;
-        the commander is told the stored mission (local NED) when it changed, and the current
-        item when a client sets it."""
-        before = self.missions.items[0]
+        the commander is told the stored mission and fence (local NED) when they changed, and the
+        current item when a client sets it."""
+        before, fence_before = self.missions.items[0], self.missions.items[1]
         replies = self.missions.handle(msg)
         if self.missions.items[0] is not before:      # an upload completed, or a clear
             self.cmdr.load_mission(local_items(self.missions.items[0], self.tm.home, EARTH_RADIUS_M),
                                    self.missions.current)
+        if self.missions.items[1] is not fence_before:
+            self.cmdr.load_fence(local_items(self.missions.items[1], self.tm.home, EARTH_RADIUS_M))
         elif msg.get_type() == "MISSION_SET_CURRENT":
             self.cmdr.set_mission_current(self.missions.current)
         return replies

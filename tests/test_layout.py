@@ -101,6 +101,7 @@ def test_that_the_two_signing_modules_stay_twins():
 #: (with its response model), and their registrations.
 PX4_ALLOWED = ("companion/mavlink/autopilots/px4.py", "companion/mavlink/autopilots/__init__.py",
                "mavsim/personalities/px4.py", "mavsim/personalities/px4_response.py", "mavsim/personalities/px4_mission.py",
+               "mavsim/personalities/px4_geofence.py",
                "mavsim/personalities/__init__.py")
 #: The folders the check covers.
 PX4_CHECKED = ("companion", "mavsim")

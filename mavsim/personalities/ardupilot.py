@@ -387,6 +387,9 @@ class Commander:
     def set_mission_current(self, seq: int) -> None:
         """Nothing (the mission is not flown)."""
 
+    def load_fence(self, items: list) -> None:
+        """Nothing: ArduCopter's fence is served (mission protocol), not kept (no breach action)."""
+
     def position_aiding(self, unaided_s: float | None, now_s: float, vehicle: VehicleState) -> None:
         """Nothing: ArduPilot's EKF failsafe is not modelled (its personality refuses outages of
         ``gps_outage_max_s`` or more)."""

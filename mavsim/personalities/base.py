@@ -130,6 +130,10 @@ class Commander(Protocol):
     def set_mission_current(self, seq: int) -> None:
         """MISSION_SET_CURRENT: the mission goes on from item ``seq`` (at once, if flying)."""
 
+    def load_fence(self, items: list) -> None:
+        """The stored fence items (:class:`mavsim.missions.MissionItem` list, local NED), after an
+        upload completed or a clear."""
+
     def accept_setpoint(self, sp: OffboardSetpoint, now_s: float) -> None:
         """A validated offboard setpoint arrived (proof of life; flown in the offboard mode)."""
 

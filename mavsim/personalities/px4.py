@@ -46,8 +46,9 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from mavsim.missions import MissionItem
 from mavsim.params import PARAM_TYPE_INT32, PARAM_TYPE_REAL32, ParamStore, ParamTable
-from mavsim.personalities.base import SEV_CRITICAL, SEV_INFO, OffboardSetpoint
+from mavsim.personalities.base import SEV_CRITICAL, SEV_INFO, SEV_WARNING, OffboardSetpoint
 from mavsim.personalities.px4_mission import ACTIVE, COMPLETE, NO_MISSION, MissionFlight
+from mavsim.personalities.px4_geofence import FenceZones, GeofenceWatch
 from mavsim.personalities.px4_response import Px4Response
 from mavsim.vehicle import VehicleCommand, VehicleState
 
@@ -215,6 +216,8 @@ class Commander:
         self._reached_repeats = 0                     # times the last one is sent again, with MISSION_CURRENT
         self._last_reached = 0
         self._acc_integrator = np.zeros(3)
+        #: the failsafe geofence (GF_*) and the stored fence zones (:mod:`mavsim.personalities.px4_geofence`)
+        self.geofence = GeofenceWatch(params)
         self._enter(mode, vehicle, 0.0)
 
     # ------------------------------------------------------------------ encoding
@@ -277,6 +280,10 @@ class Commander:
         mission in flight flies on until AUTO.MISSION is entered again."""
         self.mission_items = list(items)
         self.mission_start = int(current)
+
+    def load_fence(self, items: list[MissionItem]) -> None:
+        """The stored fence (local NED), after an upload or a clear: kept from the next step."""
+        self.geofence.load(FenceZones.from_items(items))
 
     def set_mission_current(self, seq: int) -> None:
         """MISSION_SET_CURRENT: the mission goes on from item ``seq``, at once if it is flying."""
@@ -515,6 +522,13 @@ class Commander:
         return v, yaw, rate
 
     def _checks(self, now_s: float, vehicle: VehicleState) -> None:
+        fence = self.geofence.step(now_s, vehicle.position_ned_m, self.mode)
+        if fence is not None:
+            for text in fence.texts:
+                self._say(SEV_WARNING, text)
+            if fence.mode is not None:
+                self._enter(fence.mode, vehicle, now_s)
+                self.failsafe = True
         if self.mode == "OFFBOARD" and not self.offboard_signal(now_s):
             fallback = _FALLBACK[int(self.params["COM_OBL_RC_ACT"])]
             self._say(SEV_CRITICAL, f"Failsafe: offboard lost, switching to {DISPLAY[fallback]}")
