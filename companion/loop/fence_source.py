@@ -156,7 +156,7 @@ class FenceSource:
         """The autopilot's fence about home, from its parameters (none for an autopilot that names none)."""
         if autopilot is None or kind is None:
             return Preparation(False)
-        names = tuple(getattr(kind, "fence_params", ()))
+        names = tuple(kind.fence_params)
         if not names:                                  # an autopilot whose fence parameters are not read
             self._limits_due = False
             return self._no_zones_check()

@@ -122,21 +122,32 @@ class VehicleClock:
 
     def answer(self, t_rx: float, tc1_ns: int, ts1_ns: int) -> bool:
         """A TIMESYNC answer (``tc1`` the autopilot's ns, ``ts1`` ours echoed) arrived at ``t_rx``; True if used."""
-        if ts1_ns not in self._pending:
-            self.answers_foreign += 1
+        measured = self._round_trip(t_rx, tc1_ns, ts1_ns)
+        if measured is None:
             return False
-        self._pending.remove(ts1_ns)
-        rx_ns = link_ns(t_rx)  # integer nanoseconds: exact differences whatever the magnitude of link time
-        rtt_ns = rx_ns - ts1_ns
         one_way = self.one_way_offset(float(t_rx))
-        if not (0 <= rtt_ns <= _MAX_RTT_S * _NS) or one_way is None:
+        if one_way is None:           # before any pose: nothing for the answer to measure
             self.answers_discarded += 1
             return False
-        offset = (ts1_ns + rx_ns - 2 * tc1_ns) / (2 * _NS)  # the midpoint; twice it is an exact integer
-        self._round_trips.append(_RoundTrip(float(t_rx), offset, rtt_ns / _NS, one_way - offset))
+        offset, rtt = measured
+        self._round_trips.append(_RoundTrip(float(t_rx), offset, rtt, one_way - offset))
         self.answers_used += 1
         self._check_agreement(self._round_trips[-1].excess_s)
         return True
+
+    def _round_trip(self, t_rx: float, tc1_ns: int, ts1_ns: int) -> tuple[float, float] | None:
+        """(midpoint offset, round trip) in s of an answer to one of this clock's requests; None, counted,
+        for someone else's answer or a round trip that is negative or over :data:`_MAX_RTT_S`."""
+        if ts1_ns not in self._pending:
+            self.answers_foreign += 1
+            return None
+        self._pending.remove(ts1_ns)
+        rx_ns = link_ns(t_rx)  # integer nanoseconds: exact differences whatever the magnitude of link time
+        rtt_ns = rx_ns - ts1_ns
+        if not 0 <= rtt_ns <= _MAX_RTT_S * _NS:
+            self.answers_discarded += 1
+            return None
+        return (ts1_ns + rx_ns - 2 * tc1_ns) / (2 * _NS), rtt_ns / _NS  # twice the midpoint is an exact integer
 
     # ------------------------------------------------------------------ estimates
 

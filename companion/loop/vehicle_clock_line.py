@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from companion.loop.vehicle_clock import _MAX_RTT_S, _NS, _RTT_SLACK_S, VehicleClock, _RoundTrip, link_ns
+from companion.loop.vehicle_clock import _RTT_SLACK_S, VehicleClock, _RoundTrip
 
 WINDOW_S = 2.0
 _MIN_FIT_SPAN_S = 1.0
@@ -30,17 +30,11 @@ class TimesyncLineClock(VehicleClock):
         self._fit: tuple[float, float, float] | None = None  # (t_ref, offset at t_ref, drift)
 
     def answer(self, t_rx: float, tc1_ns: int, ts1_ns: int) -> bool:
-        if ts1_ns not in self._pending:
-            self.answers_foreign += 1
+        measured = self._round_trip(t_rx, tc1_ns, ts1_ns)
+        if measured is None:
             return False
-        self._pending.remove(ts1_ns)
-        rx_ns = link_ns(t_rx)
-        rtt_ns = rx_ns - ts1_ns
-        if not (0 <= rtt_ns <= _MAX_RTT_S * _NS):
-            self.answers_discarded += 1
-            return False
-        offset = (ts1_ns + rx_ns - 2 * tc1_ns) / (2 * _NS)
-        self._round_trips.append(_RoundTrip(float(t_rx), offset, rtt_ns / _NS, math.nan))
+        offset, rtt = measured
+        self._round_trips.append(_RoundTrip(float(t_rx), offset, rtt, math.nan))
         self.answers_used += 1
         self._fit = self._fit_round_trips(float(t_rx))
         synced, one_way = self._fitted(float(t_rx)), self.one_way_offset(float(t_rx))
